@@ -1,0 +1,79 @@
+"""Registry of dataset families, addressed as `family/sequence` or by a plain folder path."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from radar_slam.datasets.frame import Sequence
+from radar_slam.errors import DatasetNotFoundError
+
+DATA_ROOT_ENV = "RADAR_SLAM_DATA"
+DEFAULT_DATA_ROOT = Path("data")
+
+
+@dataclass(frozen=True)
+class Family:
+    """A dataset family.
+
+    Attributes:
+        name: family key, e.g. "mulran".
+        open: builds a Sequence from a sequence folder.
+        detect: True when a folder looks like a sequence of this family.
+        layout: human description of the expected folder layout (for error messages).
+        obtain: where the dataset can be obtained (for error messages).
+        resolve: optional hook turning (root, sequence name) into a folder, creating it if the
+            family generates its data (synthetic); None means `<root>/<family>/<sequence>`.
+    """
+
+    name: str
+    open: Callable[[Path], Sequence]
+    detect: Callable[[Path], bool]
+    layout: str
+    obtain: str
+    resolve: Callable[[Path, str], Path] | None = None
+
+
+_FAMILIES: dict[str, Family] = {}
+
+
+def register(family: Family) -> Family:
+    """Add a family to the registry (called once at import of its loader module)."""
+    if family.name in _FAMILIES:
+        raise ValueError(f"dataset family {family.name!r} registered twice")
+    _FAMILIES[family.name] = family
+    return family
+
+
+def families() -> dict[str, Family]:
+    """All registered families by name."""
+    return dict(_FAMILIES)
+
+
+def data_root(explicit: str | os.PathLike[str] | None = None) -> Path:
+    """The data root: `explicit`, else $RADAR_SLAM_DATA, else ./data."""
+    if explicit is not None:
+        return Path(explicit).expanduser()
+    env = os.environ.get(DATA_ROOT_ENV)
+    return Path(env).expanduser() if env else DEFAULT_DATA_ROOT
+
+
+def family_folder(root: Path, family: str) -> Path:
+    """`<root>/<family>`, matching the family folder name case-insensitively (e.g. `MulRan/`)."""
+    exact = root / family
+    if exact.is_dir() or not root.is_dir():
+        return exact
+    for child in root.iterdir():
+        if child.is_dir() and child.name.lower() == family.lower():
+            return child
+    return exact
+
+
+def detect_family(folder: Path) -> Family | None:
+    """The family whose layout `folder` matches, or None."""
+    for family in _FAMILIES.values():
+        if family.detect(folder):
+            return family
+    return None

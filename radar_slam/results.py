@@ -11,7 +11,9 @@ from radar_slam.errors import ResultsError
 DEFAULT_RESULTS_ROOT = Path("results")
 
 
-def result_dir(family: str, sequence: str, out: Path | None = None, now: datetime | None = None) -> Path:
+def result_dir(
+    family: str, sequence: str, out: Path | None = None, now: datetime | None = None
+) -> Path:
     """Create and return a fresh result folder.
 
     With `out`, that folder is used; it must be absent or empty, since nothing a user had may be
@@ -21,7 +23,9 @@ def result_dir(family: str, sequence: str, out: Path | None = None, now: datetim
     if out is not None:
         out = Path(out)
         if out.exists() and (not out.is_dir() or any(out.iterdir())):
-            raise ResultsError(f"{out}: output folder exists and is not empty; choose another --out")
+            raise ResultsError(
+                f"{out}: output folder exists and is not empty; choose another --out"
+            )
         out.mkdir(parents=True, exist_ok=True)
         return out
     safe = f"{family}_{sequence}".replace("/", "_").replace(os.sep, "_")

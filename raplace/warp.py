@@ -86,11 +86,17 @@ def wrap_rows(polar: NDArray) -> NDArray[np.float32]:
     return np.vstack([polar, polar[:1]]).astype(np.float32, copy=False)
 
 
-def remap(polar: NDArray, bins: NDArray[np.float32], rows: NDArray[np.float32]) -> NDArray[np.float32]:
+def remap(
+    polar: NDArray, bins: NDArray[np.float32], rows: NDArray[np.float32]
+) -> NDArray[np.float32]:
     """Sample `polar` (n_azimuths, n_bins) bilinearly at fractional (bins, rows); 0 outside."""
     return cv2.remap(
-        wrap_rows(polar), bins, rows, interpolation=cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_CONSTANT, borderValue=0.0,
+        wrap_rows(polar),
+        bins,
+        rows,
+        interpolation=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0.0,
     )
 
 

@@ -19,7 +19,8 @@ MULRAN_FIRST_ENCODER = 9
 MULRAN_ENCODER_STEP = 14
 MULRAN_T_BASE_RADAR = np.array([1.50, -0.04, np.deg2rad(0.9)])
 """SE(2) pose of the radar in the vehicle base frame (x-forward, y-left): 1.50 m ahead,
-0.04 m right, yaw +0.9 deg. `global_pose.csv` holds the base; T_world_radar = T_world_base * this."""
+0.04 m right, yaw +0.9 deg. `global_pose.csv` holds the base pose;
+T_world_radar = T_world_base * MULRAN_T_BASE_RADAR."""
 
 # Oxford Radar RobotCar: Navtech CTS350-X
 OXFORD_N_AZIMUTHS = 400

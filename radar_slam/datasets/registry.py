@@ -8,7 +8,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from radar_slam.datasets.frame import Sequence
-from radar_slam.errors import DatasetNotFoundError
 
 DATA_ROOT_ENV = "RADAR_SLAM_DATA"
 DEFAULT_DATA_ROOT = Path("data")

@@ -1,0 +1,195 @@
+"""Checked readers shared by the dataset loaders: PNG scans, numeric CSV tables, stamp lists.
+
+Every problem with a file becomes a `DatasetFormatError` naming the file and what is wrong, so
+the CLI shows one line instead of a numpy or OpenCV traceback. Nothing here writes to disk.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from radar_slam.datasets.navtech import ENCODER_TICKS_PER_REV, OXFORD_HEADER_BYTES
+from radar_slam.errors import DatasetFormatError
+
+PNG_SUFFIX = ".png"
+
+
+def read_gray_png(path: Path, shape: tuple[int, int]) -> NDArray[np.uint8]:
+    """Read an 8-bit single-channel PNG and check its shape.
+
+    Args:
+        path: the PNG file.
+        shape: required (rows, cols) of the image.
+
+    Returns:
+        (rows, cols) uint8 image, exactly as stored.
+
+    Raises:
+        DatasetFormatError: missing, unreadable or truncated file, not 8-bit grayscale, or a
+            shape other than `shape`.
+    """
+    if not path.is_file():
+        raise DatasetFormatError(f"{path}: scan file is missing")
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise DatasetFormatError(f"{path}: cannot decode PNG (unreadable or truncated file)")
+    if image.ndim != 2 or image.dtype != np.uint8:
+        raise DatasetFormatError(
+            f"{path}: expected an 8-bit single-channel PNG, got {image.dtype} with shape "
+            f"{image.shape}"
+        )
+    if image.shape != shape:
+        raise DatasetFormatError(
+            f"{path}: scan has shape {image.shape[0]} x {image.shape[1]}, expected "
+            f"{shape[0]} x {shape[1]}"
+        )
+    return image
+
+
+@dataclass(frozen=True)
+class NavtechHeader:
+    """The 11-byte Oxford-style header at the start of each azimuth row.
+
+    Attributes:
+        times: (n_azimuths,) int64 timestamp of each azimuth, in the file's unit (us or ns).
+        encoders: (n_azimuths,) int64 encoder counts in [0, 5600), clockwise from forward.
+        valid: (n_azimuths,) bool, the valid flag (byte 10 non-zero).
+    """
+
+    times: NDArray[np.int64]
+    encoders: NDArray[np.int64]
+    valid: NDArray[np.bool_]
+
+
+def parse_navtech_header(image: NDArray[np.uint8], path: Path) -> NavtechHeader:
+    """Decode the per-row header of an Oxford-form scan (n_azimuths, 11 + n_bins).
+
+    Bytes 0-7: int64 little-endian timestamp; 8-9: uint16 little-endian encoder; 10: valid flag.
+
+    Raises:
+        DatasetFormatError: encoder counts outside [0, 5600) or timestamps decreasing along the
+            sweep (the file is not an Oxford-form scan or is corrupt).
+    """
+    header = np.ascontiguousarray(image[:, :OXFORD_HEADER_BYTES])
+    times = header[:, 0:8].copy().view("<i8").reshape(-1).astype(np.int64)
+    encoders = header[:, 8:10].copy().view("<u2").reshape(-1).astype(np.int64)
+    valid = header[:, 10] != 0
+    if np.any(encoders >= ENCODER_TICKS_PER_REV):
+        bad = int(np.argmax(encoders >= ENCODER_TICKS_PER_REV))
+        raise DatasetFormatError(
+            f"{path}: row {bad} has encoder count {encoders[bad]} (must be < "
+            f"{ENCODER_TICKS_PER_REV}); not an Oxford-form radar scan?"
+        )
+    if np.any(np.diff(times) < 0):
+        bad = int(np.argmax(np.diff(times) < 0)) + 1
+        raise DatasetFormatError(f"{path}: azimuth timestamps decrease at row {bad}")
+    return NavtechHeader(times=times, encoders=encoders, valid=valid)
+
+
+def list_stamped_files(
+    folder: Path, suffix: str = PNG_SUFFIX
+) -> tuple[NDArray[np.int64], list[Path]]:
+    """Files `<integer stamp><suffix>` in `folder`, sorted by stamp.
+
+    Returns:
+        (stamps (N,) int64, paths) in increasing stamp order. Other files are ignored.
+
+    Raises:
+        DatasetFormatError: two files with the same stamp (e.g. `0123.png` and `123.png`).
+    """
+    entries = [
+        (int(path.stem), path)
+        for path in folder.iterdir()
+        if path.suffix.lower() == suffix and path.stem.isdigit() and path.is_file()
+    ]
+    entries.sort(key=lambda entry: entry[0])
+    stamps = np.array([stamp for stamp, _ in entries], dtype=np.int64)
+    duplicated = np.flatnonzero(np.diff(stamps) == 0)
+    if duplicated.size:
+        first = entries[int(duplicated[0])]
+        second = entries[int(duplicated[0]) + 1]
+        raise DatasetFormatError(
+            f"{folder}: duplicated scan timestamp {first[0]} ({first[1].name}, {second[1].name})"
+        )
+    return stamps, [path for _, path in entries]
+
+
+def check_strictly_increasing(stamps: NDArray[np.int64], path: Path, what: str) -> None:
+    """Raise DatasetFormatError unless `stamps` increase strictly (no repeats, no disorder).
+
+    Args:
+        stamps: (N,) timestamps as read from `path`, in file order.
+        path: file they came from (for the message).
+        what: name of the column, e.g. "timestamp".
+    """
+    steps = np.diff(stamps)
+    if np.any(steps <= 0):
+        row = int(np.argmax(steps <= 0)) + 1
+        problem = "duplicated" if steps[row - 1] == 0 else "unsorted"
+        raise DatasetFormatError(
+            f"{path}: {problem} {what} at data row {row + 1}: {stamps[row - 1]} then {stamps[row]}"
+        )
+
+
+def read_numeric_table(
+    path: Path,
+    n_columns: int,
+    int_columns: tuple[int, ...],
+    header_rows: int = 0,
+    delimiter: str | None = ",",
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Read a numeric text table with a fixed column count.
+
+    Integer columns (nanosecond or microsecond stamps) are parsed as exact int64, since float64
+    cannot hold 19-digit timestamps; all columns are also parsed as float64.
+
+    Args:
+        path: the text file.
+        n_columns: required number of columns on every row.
+        int_columns: indices of the columns to return as int64.
+        header_rows: leading lines to skip.
+        delimiter: column separator; None splits on whitespace.
+
+    Returns:
+        (ints (N, len(int_columns)) int64, values (N, n_columns) float64).
+
+    Raises:
+        DatasetFormatError: missing or empty file, a row with another column count, a non-numeric
+            entry, or a NaN / infinite value.
+    """
+    if not path.is_file():
+        raise DatasetFormatError(f"{path}: file is missing")
+    try:
+        text = path.read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetFormatError(f"{path}: cannot read as text ({exc})") from exc
+    lines = [line for line in text.splitlines()[header_rows:] if line.strip()]
+    if not lines:
+        raise DatasetFormatError(f"{path}: no data rows")
+    counts = np.array([len(line.split(delimiter)) for line in lines])
+    if np.any(counts != n_columns):
+        bad = int(np.argmax(counts != n_columns))
+        raise DatasetFormatError(
+            f"{path}: data row {bad + 1} has {counts[bad]} columns, expected {n_columns}"
+        )
+    try:
+        values = np.loadtxt(lines, delimiter=delimiter, dtype=np.float64, ndmin=2)
+    except ValueError as exc:
+        raise DatasetFormatError(f"{path}: non-numeric entry ({exc})") from exc
+    finite = np.isfinite(values)
+    if not finite.all():
+        row, col = np.argwhere(~finite)[0]
+        raise DatasetFormatError(
+            f"{path}: data row {row + 1}, column {col} is {lines[row].split(delimiter)[col]!r} "
+            "(NaN or infinite)"
+        )
+    try:
+        ints = np.loadtxt(lines, delimiter=delimiter, dtype=np.int64, usecols=int_columns, ndmin=2)
+    except ValueError as exc:
+        raise DatasetFormatError(f"{path}: timestamp column is not an integer ({exc})") from exc
+    return ints, values

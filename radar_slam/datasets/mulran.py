@@ -1,0 +1,375 @@
+"""MulRan loader (Navtech CIR204-H): polar PNG scans and `global_pose.csv` ground truth.
+
+Sequence folder layouts accepted (the first scan folder found wins, in this order)::
+
+    <seq>/sensor_data/radar/polar/<t_ns>.png      3360 rows (bins) x 400 cols (azimuths)
+    <seq>/radar/polar/<t_ns>.png
+    <seq>/polar/<t_ns>.png
+    <seq>/sensor_data/radar/polar_oxford_form/<t_ns>.png   400 x (11 + 3360), Oxford header, ns
+    <seq>/radar/polar_oxford_form/<t_ns>.png
+    <seq>/polar_oxford_form/<t_ns>.png
+    <seq>/global_pose.csv                         optional GT: t_ns + 3x4 row-major [R|t]
+    <seq>/sensor_data/navtech_top_stamp.csv       optional, one t_ns per line (or <seq>/...)
+
+Time conventions: a scan's file name is the time of its LAST azimuth (end of sweep). The frame's
+`timestamp_ns` is that time, and the ground truth refers to it. Plain polar PNGs carry no
+per-azimuth times; they are spread uniformly over one scan period ending at the file time (the
+period is the gap to the previous radar stamp, or 250 ms when that gap is implausible).
+
+Ground truth: `global_pose.csv` holds the vehicle BASE pose in MulRan's UTM-like world frame. It
+is interpolated to each scan time (x, y linearly; yaw linearly after unwrapping) and the radar
+mounting `MULRAN_T_BASE_RADAR` is applied: T_world_radar = T_world_base * T_base_radar. Scans
+up to 0.5 s outside the GT time span take the nearest end pose; scans further out get NaN poses
+and a logged warning.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry import se2
+from radar_slam.datasets._io import (
+    check_strictly_increasing,
+    list_stamped_files,
+    parse_navtech_header,
+    read_gray_png,
+    read_numeric_table,
+)
+from radar_slam.datasets.frame import RadarFrame
+from radar_slam.datasets.navtech import (
+    MULRAN_ENCODER_STEP,
+    MULRAN_FIRST_ENCODER,
+    MULRAN_N_AZIMUTHS,
+    MULRAN_N_BINS,
+    MULRAN_RANGE_RESOLUTION_M,
+    MULRAN_T_BASE_RADAR,
+    OXFORD_HEADER_BYTES,
+    SCAN_RATE_HZ,
+    encoder_to_azimuth_ccw,
+)
+from radar_slam.datasets.registry import Family, register
+from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+
+logger = logging.getLogger(__name__)
+
+MULRAN_FAMILY = "mulran"
+MULRAN_SENSOR = "navtech-cir204h"
+MULRAN_OBTAIN = "https://sites.google.com/view/mulran-pr"
+
+POLAR_FOLDERS = ("sensor_data/radar/polar", "radar/polar", "polar")
+"""Folders of plain polar PNGs (bins x azimuths), relative to the sequence folder."""
+OXFORD_FORM_FOLDERS = (
+    "sensor_data/radar/polar_oxford_form",
+    "radar/polar_oxford_form",
+    "polar_oxford_form",
+)
+"""Folders of Oxford-form PNGs (azimuths x (11-byte header + bins), header times in ns)."""
+GLOBAL_POSE_FILE = "global_pose.csv"
+GLOBAL_POSE_COLUMNS = 13
+"""t_ns, then the 3x4 row-major [R|t] of the base in the world frame."""
+GP_COL_R00, GP_COL_X, GP_COL_R10, GP_COL_Y = 1, 4, 5, 8
+STAMP_FILES = ("sensor_data/navtech_top_stamp.csv", "navtech_top_stamp.csv")
+
+NOMINAL_SCAN_PERIOD_NS = int(round(1e9 / SCAN_RATE_HZ))
+"""One revolution at 4 Hz [ns]: the scan period used when stamps cannot tell it."""
+SCAN_PERIOD_TOLERANCE = 0.2
+"""A gap between radar stamps counts as one scan period if within +-20 % of the nominal one."""
+GT_CLAMP_NS = 500_000_000
+"""Scans at most this far outside the GT time span take the end pose; further out get NaN."""
+
+MULRAN_LAYOUT = (
+    "<root>/mulran/<SEQ>/sensor_data/radar/polar/<t_ns>.png (also <SEQ>/radar/polar/, "
+    "<SEQ>/polar/ or polar_oxford_form/), optional <SEQ>/global_pose.csv and "
+    "<SEQ>/sensor_data/navtech_top_stamp.csv"
+)
+
+
+@dataclass(frozen=True)
+class ScanFolder:
+    """Where a MulRan sequence keeps its scans.
+
+    Attributes:
+        path: folder of `<t_ns>.png` files.
+        oxford_form: True for `polar_oxford_form` (azimuth rows with an 11-byte header),
+            False for plain polar images (bin rows, azimuth columns, no metadata).
+    """
+
+    path: Path
+    oxford_form: bool
+
+
+def find_scan_folder(sequence_folder: Path) -> ScanFolder | None:
+    """The scan folder of a MulRan sequence (plain polar preferred), or None when there is none."""
+    for relative in POLAR_FOLDERS:
+        if (sequence_folder / relative).is_dir():
+            return ScanFolder(sequence_folder / relative, oxford_form=False)
+    for relative in OXFORD_FORM_FOLDERS:
+        if (sequence_folder / relative).is_dir():
+            return ScanFolder(sequence_folder / relative, oxford_form=True)
+    return None
+
+
+def is_mulran_sequence(folder: Path) -> bool:
+    """True when `folder` holds one of the MulRan scan folders."""
+    return folder.is_dir() and find_scan_folder(folder) is not None
+
+
+def column_azimuths_rad(n_azimuths: int = MULRAN_N_AZIMUTHS) -> NDArray[np.float64]:
+    """CCW azimuth [rad] of each polar column: column j is encoder 9 + 14 j, clockwise."""
+    encoders = MULRAN_FIRST_ENCODER + MULRAN_ENCODER_STEP * np.arange(n_azimuths)
+    return encoder_to_azimuth_ccw(encoders)
+
+
+def scan_periods_ns(
+    scan_stamps_ns: NDArray[np.int64], radar_stamps_ns: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Duration of the sweep ending at each scan stamp [ns].
+
+    Args:
+        scan_stamps_ns: (N,) end-of-sweep times of the scans.
+        radar_stamps_ns: (M,) sorted end-of-sweep times of every sweep the radar recorded
+            (navtech_top_stamp.csv, or the scan stamps themselves).
+
+    Returns:
+        (N,) int64: the gap to the previous radar stamp when it is within the tolerance of one
+        revolution, otherwise the nominal 250 ms (first scan, dropped sweeps).
+    """
+    previous_index = np.searchsorted(radar_stamps_ns, scan_stamps_ns, side="left") - 1
+    has_previous = previous_index >= 0
+    gaps = np.where(
+        has_previous,
+        scan_stamps_ns - radar_stamps_ns[np.maximum(previous_index, 0)],
+        NOMINAL_SCAN_PERIOD_NS,
+    )
+    plausible = (
+        np.abs(gaps - NOMINAL_SCAN_PERIOD_NS) <= SCAN_PERIOD_TOLERANCE * NOMINAL_SCAN_PERIOD_NS
+    )
+    return np.where(plausible, gaps, NOMINAL_SCAN_PERIOD_NS).astype(np.int64)
+
+
+def uniform_azimuth_times_ns(end_ns: int, period_ns: int, n_azimuths: int) -> NDArray[np.int64]:
+    """Azimuth times spread uniformly over one period, the last one at `end_ns`.
+
+    Azimuth j is at end - (n - 1 - j) * period / n, so consecutive sweeps tile time evenly.
+    """
+    steps_back = np.arange(n_azimuths - 1, -1, -1, dtype=np.float64)
+    return end_ns - np.round(steps_back * (period_ns / n_azimuths)).astype(np.int64)
+
+
+def read_global_pose(path: Path) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Read MulRan `global_pose.csv`.
+
+    Returns:
+        (times (N,) int64 [ns] strictly increasing, T_world_base (N, 3) SE(2) poses: x = column 4,
+        y = column 8, yaw = atan2(R10, R00) [m, m, rad]).
+
+    Raises:
+        DatasetFormatError: wrong column count, non-numeric or NaN entries, unsorted or
+            duplicated times.
+    """
+    ints, values = read_numeric_table(path, GLOBAL_POSE_COLUMNS, int_columns=(0,))
+    times = ints[:, 0]
+    check_strictly_increasing(times, path, "timestamp")
+    yaw = np.arctan2(values[:, GP_COL_R10], values[:, GP_COL_R00])
+    poses = np.stack([values[:, GP_COL_X], values[:, GP_COL_Y], yaw], axis=-1)
+    return times, poses
+
+
+def interpolate_poses(
+    times_ns: NDArray[np.int64],
+    poses: NDArray[np.float64],
+    query_ns: NDArray[np.int64],
+    clamp_ns: int = GT_CLAMP_NS,
+) -> NDArray[np.float64]:
+    """Interpolate SE(2) poses to query times.
+
+    x and y are linear in time; yaw is linear after unwrapping (so it turns the short way through
+    +-pi). Queries up to `clamp_ns` outside [times[0], times[-1]] take the end pose; further out
+    the row is NaN.
+
+    Args:
+        times_ns: (N,) strictly increasing pose times [ns].
+        poses: (N, 3) poses (x, y, yaw).
+        query_ns: (M,) times to interpolate at [ns].
+        clamp_ns: how far outside the span a query may still be clamped [ns].
+
+    Returns:
+        (M, 3) interpolated poses, yaw wrapped to [-pi, pi).
+    """
+    origin = times_ns[0]
+    t = (times_ns - origin).astype(np.float64)
+    q = (query_ns - origin).astype(np.float64)
+    yaw = np.unwrap(poses[:, 2])
+    result = np.stack(
+        [np.interp(q, t, poses[:, 0]), np.interp(q, t, poses[:, 1]), np.interp(q, t, yaw)],
+        axis=-1,
+    )
+    result[:, 2] = se2.wrap_angle(result[:, 2])
+    outside = (query_ns < times_ns[0] - clamp_ns) | (query_ns > times_ns[-1] + clamp_ns)
+    result[outside] = np.nan
+    return result
+
+
+def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
+    """T_world_radar (N, 3) at each scan time, from `global_pose.csv` (NaN rows outside GT)."""
+    times, base_poses = read_global_pose(gt_path)
+    base_at_scans = interpolate_poses(times, base_poses, scan_stamps_ns)
+    missing = int(np.isnan(base_at_scans[:, 0]).sum())
+    if missing:
+        logger.warning(
+            "%s: %d of %d scans lie more than %.1f s outside its time span; their ground truth "
+            "is NaN",
+            gt_path,
+            missing,
+            len(scan_stamps_ns),
+            GT_CLAMP_NS / 1e9,
+        )
+    return se2.compose(base_at_scans, MULRAN_T_BASE_RADAR)
+
+
+def _read_stamp_list(path: Path) -> NDArray[np.int64]:
+    """Read navtech_top_stamp.csv: one t_ns per line, strictly increasing."""
+    ints, _ = read_numeric_table(path, 1, int_columns=(0,))
+    stamps = ints[:, 0]
+    check_strictly_increasing(stamps, path, "timestamp")
+    return stamps
+
+
+class MulRanSequence:
+    """A MulRan radar sequence; frames are read lazily, one PNG per `__getitem__`.
+
+    Args:
+        folder: the sequence folder (e.g. `<root>/mulran/KAIST01`).
+        n_bins: range bins per azimuth (3360 for the CIR204-H).
+        range_resolution_m: size of one bin [m].
+        family: family name reported by the sequence (a generator writing MulRan layout may pass
+            its own).
+
+    Raises:
+        DatasetNotFoundError: `folder` does not exist.
+        DatasetFormatError: no scan folder, no scans, duplicated scan stamps, or a malformed
+            navtech_top_stamp.csv.
+    """
+
+    def __init__(
+        self,
+        folder: Path,
+        n_bins: int = MULRAN_N_BINS,
+        range_resolution_m: float = MULRAN_RANGE_RESOLUTION_M,
+        family: str = MULRAN_FAMILY,
+    ) -> None:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise DatasetNotFoundError(f"MulRan sequence folder {folder} does not exist")
+        scans = find_scan_folder(folder)
+        if scans is None:
+            looked = ", ".join(POLAR_FOLDERS + OXFORD_FORM_FOLDERS)
+            raise DatasetFormatError(f"{folder}: no MulRan scan folder (looked for {looked})")
+        stamps, paths = list_stamped_files(scans.path)
+        if not paths:
+            raise DatasetFormatError(f"{scans.path}: no scans (<t_ns>.png files)")
+        self.name: str = folder.name
+        self.family: str = family
+        self.folder = folder
+        self.scan_folder = scans
+        self.n_bins = n_bins
+        self.range_resolution_m = range_resolution_m
+        self._paths = paths
+        self._stamps = stamps
+        self._stamps.flags.writeable = False
+        gt_path = folder / GLOBAL_POSE_FILE
+        self.gt_path: Path | None = gt_path if gt_path.is_file() else None
+        radar_stamps = self._radar_stamps(folder, stamps)
+        self._periods_ns = scan_periods_ns(stamps, radar_stamps)
+
+    @staticmethod
+    def _radar_stamps(folder: Path, scan_stamps: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Stamps of every recorded sweep: navtech_top_stamp.csv when present, cross-checked."""
+        for relative in STAMP_FILES:
+            path = folder / relative
+            if path.is_file():
+                listed = _read_stamp_list(path)
+                unlisted = int(np.count_nonzero(~np.isin(scan_stamps, listed)))
+                if unlisted:
+                    logger.warning(
+                        "%s: %d of %d scan file names are not listed in it",
+                        path,
+                        unlisted,
+                        len(scan_stamps),
+                    )
+                    return np.union1d(listed, scan_stamps)
+                return listed
+        return scan_stamps
+
+    def __len__(self) -> int:
+        return len(self._paths)
+
+    def __getitem__(self, index: int) -> RadarFrame:
+        """Read scan `index` (negative indices count from the end).
+
+        Raises:
+            IndexError: index out of range.
+            DatasetFormatError: unreadable PNG or wrong shape.
+        """
+        if not -len(self) <= index < len(self):
+            raise IndexError(f"frame {index} out of range for {len(self)} frames")
+        index %= len(self)
+        path = self._paths[index]
+        stamp = int(self._stamps[index])
+        if self.scan_folder.oxford_form:
+            image = read_gray_png(path, (MULRAN_N_AZIMUTHS, OXFORD_HEADER_BYTES + self.n_bins))
+            header = parse_navtech_header(image, path)
+            polar = np.ascontiguousarray(image[:, OXFORD_HEADER_BYTES:])
+            azimuths = encoder_to_azimuth_ccw(header.encoders)
+            azimuth_times = header.times
+        else:
+            image = read_gray_png(path, (self.n_bins, MULRAN_N_AZIMUTHS))
+            polar = np.ascontiguousarray(image.T)
+            azimuths = column_azimuths_rad(MULRAN_N_AZIMUTHS)
+            azimuth_times = uniform_azimuth_times_ns(
+                stamp, int(self._periods_ns[index]), MULRAN_N_AZIMUTHS
+            )
+        return RadarFrame(
+            timestamp_ns=stamp,
+            polar=polar,
+            azimuths_rad=azimuths,
+            range_resolution_m=self.range_resolution_m,
+            sensor=MULRAN_SENSOR,
+            azimuth_times_ns=azimuth_times,
+        )
+
+    @property
+    def timestamps_ns(self) -> NDArray[np.int64]:
+        """(N,) int64 scan times [ns] (end of sweep = file name), increasing; read-only."""
+        return self._stamps
+
+    @cached_property
+    def ground_truth(self) -> NDArray[np.float64] | None:
+        """(N, 3) T_world_radar (x, y, yaw) at each scan time, MulRan world frame; None without GT.
+
+        Read and interpolated on first access. Rows are NaN for scans more than 0.5 s outside
+        the GT time span.
+        """
+        if self.gt_path is None:
+            return None
+        return radar_ground_truth(self.gt_path, self._stamps)
+
+    def __repr__(self) -> str:
+        return f"MulRanSequence({str(self.folder)!r}, frames={len(self)})"
+
+
+MULRAN = register(
+    Family(
+        name=MULRAN_FAMILY,
+        open=MulRanSequence,
+        detect=is_mulran_sequence,
+        layout=MULRAN_LAYOUT,
+        obtain=MULRAN_OBTAIN,
+    )
+)

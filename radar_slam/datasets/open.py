@@ -1,0 +1,91 @@
+"""Resolve a sequence spec (`family/sequence` or a folder path) to an opened Sequence."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from radar_slam.datasets import registry
+from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.registry import Family, detect_family, families, family_folder
+from radar_slam.errors import DatasetNotFoundError
+
+SPEC_SEPARATOR = "/"
+
+
+def _split_family_spec(spec: str) -> tuple[Family, str] | None:
+    """(family, sequence) when `spec` reads `family/sequence` with a registered family."""
+    head, separator, tail = spec.partition(SPEC_SEPARATOR)
+    family = families().get(head.lower())
+    if not separator or not tail or family is None:
+        return None
+    return family, tail.strip(SPEC_SEPARATOR)
+
+
+def _layouts_and_sources(selected: list[Family]) -> str:
+    """Expected layout and download address of each family, for error messages."""
+    return "\n".join(
+        f"  {family.name}: expected {family.layout}\n    obtain it from {family.obtain}"
+        for family in selected
+    )
+
+
+def sequence_folder(root: Path, family: Family, sequence: str) -> Path:
+    """The folder of `family/sequence` under `root` (the family's own resolver when it has one)."""
+    if family.resolve is not None:
+        return family.resolve(root, sequence)
+    return family_folder(root, family.name) / sequence
+
+
+def open_sequence(
+    spec: str | os.PathLike[str], data_root: str | os.PathLike[str] | None = None
+) -> Sequence:
+    """Open a sequence named `family/sequence` or given as a path to its folder.
+
+    `family/sequence` resolves to `<root>/<family>/<sequence>` (family folder matched
+    case-insensitively), where root is `data_root`, else $RADAR_SLAM_DATA, else ./data. A
+    family with a resolver (e.g. generated data) supplies the folder itself. Any other spec is a
+    folder path whose family is detected from its layout; a bare name that is not a folder is
+    also looked for as `<root>/<family>/<name>` in every family without a resolver.
+
+    Raises:
+        DatasetNotFoundError: nothing found; the message names every place looked in, the
+            expected layouts and where to obtain the data.
+        DatasetFormatError: the folder was found but its content is malformed.
+    """
+    root = registry.data_root(data_root)
+    looked_in: list[Path] = []
+    candidates: list[Family] = list(families().values())
+    named = _split_family_spec(spec) if isinstance(spec, str) else None
+    if named is not None:
+        family, sequence = named
+        candidates = [family]
+        folder = sequence_folder(root, family, sequence)
+        if folder.is_dir():
+            return family.open(folder)
+        looked_in.append(folder.absolute())
+    path = Path(spec).expanduser()
+    if path.is_dir():
+        detected = detect_family(path)
+        if detected is not None:
+            return detected.open(path)
+        raise DatasetNotFoundError(
+            f"{path} exists but matches no known dataset layout; expected one of:\n"
+            f"{_layouts_and_sources(candidates)}"
+        )
+    looked_in.append(path.absolute())
+    if isinstance(spec, str) and SPEC_SEPARATOR not in spec.strip(SPEC_SEPARATOR):
+        for family in candidates:
+            if family.resolve is not None:
+                continue
+            folder = family_folder(root, family.name) / spec.strip(SPEC_SEPARATOR)
+            if folder.is_dir() and family.detect(folder):
+                return family.open(folder)
+            looked_in.append(folder.absolute())
+    places = "\n".join(f"  {place}" for place in dict.fromkeys(looked_in))
+    known = ", ".join(sorted(families())) or "none registered"
+    raise DatasetNotFoundError(
+        f"sequence {str(spec)!r} not found (data root {root}; families: {known}). Looked in:\n"
+        f"{places}\nExpected layout and where to get the data:\n"
+        f"{_layouts_and_sources(candidates)}"
+    )

@@ -1,0 +1,94 @@
+"""PNG plots of trajectories and precision-recall curves (matplotlib, Agg, no pyplot state)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from radar_slam.trajectory import Trajectory
+
+logger = logging.getLogger(__name__)
+
+GT_KEY = "gt"
+FIGURE_SIZE_IN = (7.0, 7.0)
+DPI = 150
+TRAJECTORY_LINE_WIDTH = 1.2
+LOOP_LINE_WIDTH = 0.5
+LOOP_COLOR = "tab:red"
+LOOP_ALPHA = 0.6
+LOOP_COLUMNS = 4
+
+
+def _new_figure() -> Figure:
+    figure = Figure(figsize=FIGURE_SIZE_IN, dpi=DPI)
+    FigureCanvasAgg(figure)
+    return figure
+
+
+def plot_trajectories(
+    path: Path,
+    trajectories: dict[str, Trajectory],
+    loops: NDArray[np.float64] | None = None,
+    title: str = "",
+) -> None:
+    """Save a top view (x right, y up, equal axes [m]) of the trajectories as a PNG.
+
+    The entry named "gt", if any, is drawn first in black. `loops` is an (M, 4) array of
+    (x1, y1, x2, y2) [m] rows, drawn as thin lines (e.g. accepted loop closures).
+    """
+    figure = _new_figure()
+    axes = figure.add_subplot()
+    names = sorted(trajectories, key=lambda name: name != GT_KEY)  # gt first, order kept
+    for name in names:
+        xy = trajectories[name].positions
+        style = {"color": "black"} if name == GT_KEY else {}
+        axes.plot(xy[:, 0], xy[:, 1], label=name, linewidth=TRAJECTORY_LINE_WIDTH, **style)
+    if loops is not None and len(loops):
+        segments = np.asarray(loops, dtype=np.float64).reshape(-1, LOOP_COLUMNS).reshape(-1, 2, 2)
+        axes.add_collection(
+            LineCollection(
+                segments,
+                colors=LOOP_COLOR,
+                linewidths=LOOP_LINE_WIDTH,
+                alpha=LOOP_ALPHA,
+                label=f"loops ({len(segments)})",
+            )
+        )
+    axes.set_aspect("equal", adjustable="datalim")
+    axes.set_xlabel("x [m]")
+    axes.set_ylabel("y [m]")
+    axes.grid(True, linewidth=0.3)
+    if title:
+        axes.set_title(title)
+    if names or (loops is not None and len(loops)):
+        axes.legend(loc="best")
+    figure.savefig(path, bbox_inches="tight")
+    logger.info("wrote %s", path)
+
+
+def plot_pr_curves(
+    path: Path, curves: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]], title: str = ""
+) -> None:
+    """Save precision-recall curves as a PNG; `curves` maps a name to (precision, recall) arrays
+    of equal length (fractions in [0, 1])."""
+    figure = _new_figure()
+    axes = figure.add_subplot()
+    for name, (precision, recall) in curves.items():
+        axes.plot(recall, precision, label=name, linewidth=TRAJECTORY_LINE_WIDTH)
+    axes.set_xlim(0.0, 1.0)
+    axes.set_ylim(0.0, 1.05)
+    axes.set_xlabel("recall")
+    axes.set_ylabel("precision")
+    axes.grid(True, linewidth=0.3)
+    if title:
+        axes.set_title(title)
+    if curves:
+        axes.legend(loc="best")
+    figure.savefig(path, bbox_inches="tight")
+    logger.info("wrote %s", path)

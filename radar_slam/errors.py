@@ -29,3 +29,12 @@ class TrajectoryError(RadarSlamError):
 
 class ResultsError(RadarSlamError):
     """A results folder cannot be created without overwriting something."""
+
+
+class GraphError(RadarSlamError):
+    """A pose-graph operation is inconsistent: unknown or duplicate keyframe, a covariance that
+    is not symmetric positive definite, keyframes not connected to the anchored part, ..."""
+
+
+class GraphFormatError(GraphError):
+    """A pose-graph file (g2o) is malformed; the message names the file and line."""

@@ -1,0 +1,739 @@
+"""SE(2) pose graph: a thin wrapper over GTSAM Pose2 with ISAM2 and a final batch pass.
+
+Conventions (the whole project's):
+- A pose is a (3,) float array `(x [m], y [m], yaw [rad])`, T_world_keyframe.
+- A relative measurement between keyframes i and j is the pose of j in the frame of i,
+  `T_i^-1 T_j` (`odometry.se2.between(T_i, T_j)`), exactly what `gtsam.BetweenFactorPose2(i, j)`
+  expects.
+- A covariance is (3, 3) in GTSAM's Pose2 tangent space, order `(x [m], y [m], yaw [rad])`,
+  expressed in the frame of the measurement itself (right perturbation: `z * Exp(delta)`). It
+  must be symmetric positive definite; there is no identity default.
+
+Anchoring: a graph must be tied to the world. If no prior has been added when the graph is first
+optimised (`update()` or `optimize_final()`), a prior on the *first keyframe added*, at its initial
+guess, with covariance `diag(GraphConfig.prior_sigmas ** 2)` is added automatically. An explicit
+`add_prior` before that replaces the automatic one.
+
+Loop factors carry the robust kernel of `GraphConfig.loop_kernel`; odometry and priors are plain
+Gaussian. `update()` feeds ISAM2 only what is new since the last call; `optimize_final()` is a batch
+Levenberg-Marquardt or GNC (odometry and priors as known inliers) over the whole graph.
+
+Pure math: no files, no printing (g2o I/O lives in `radar_slam.g2o`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+import gtsam
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from odometry import se2
+from radar_slam.errors import ConfigError, GraphError
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+
+LoopKernel = Literal["cauchy", "huber", "none"]
+FinalPass = Literal["lm", "gnc", "none"]
+GncLoss = Literal["tls", "gm"]
+ConstraintKind = Literal["odometry", "loop"]
+
+POSE_DIM = 3
+"""Dimension of an SE(2) pose and of its tangent space (x, y, yaw)."""
+
+DEFAULT_PRIOR_SIGMAS: tuple[float, float, float] = (1e-3, 1e-3, 1e-4)
+"""Standard deviations (x [m], y [m], yaw [rad]) of the prior anchoring the first keyframe."""
+
+DEFAULT_LOOP_KERNEL_WIDTH = 3.0
+"""Robust-kernel parameter k in whitened units (Mahalanobis distance, i.e. standard deviations).
+Cauchy: weight 1 / (1 + (r / k)^2); Huber: weight 1 for r <= k, k / r beyond. k = 1 made ISAM2
+all but ignore the first loops of a strongly drifting trajectory (their residual is then hundreds
+of sigmas); k = 3 keeps them while still discounting gross outliers (tests/test_graph.py)."""
+
+DEFAULT_ISAM2_RELINEARIZE_THRESHOLD = 0.01
+"""ISAM2 relinearises a variable whose tangent-space update exceeds this (m / rad)."""
+
+DEFAULT_ISAM2_RELINEARIZE_SKIP = 1
+"""ISAM2 checks for relinearisation every this many updates."""
+
+DEFAULT_ISAM2_ITERATIONS = 1
+"""ISAM2 update steps per `PoseGraph.update()`: the first carries the new factors, the others
+relinearise once more (helps after a large loop-closure correction)."""
+
+DEFAULT_LM_MAX_ITERATIONS = 100
+DEFAULT_LM_RELATIVE_ERROR_TOL = 1e-10
+DEFAULT_LM_ABSOLUTE_ERROR_TOL = 1e-10
+
+DEFAULT_GNC_INLIER_PROBABILITY = 0.9999
+"""GNC inlier threshold: a loop whose squared Mahalanobis distance exceeds the chi-square quantile
+at this probability (3 degrees of freedom: 21.1, i.e. 4.6 sigma) is treated as an outlier. 0.99
+(11.3) made GNC reject true loops when the odometry covariance understates a strong drift
+(tests/test_graph.py, "strong" scenario)."""
+
+SYMMETRY_TOLERANCE = 1e-9
+"""Largest relative asymmetry |C - C^T| / max|C| accepted in a covariance matrix."""
+
+
+@dataclass(frozen=True)
+class GraphConfig:
+    """Settings of the pose-graph back end.
+
+    Attributes:
+        prior_sigmas: standard deviations (x [m], y [m], yaw [rad]) of the automatic prior on the
+            first keyframe (and of the prior put on `FIX` vertices read from g2o).
+        loop_kernel: robust loss of loop factors in ISAM2 and the LM final pass.
+        loop_kernel_width: its parameter k, in standard deviations (whitened units).
+        isam2_relinearize_threshold: ISAM2 relinearisation threshold (tangent units, m / rad).
+        isam2_relinearize_skip: ISAM2 relinearisation check interval (updates).
+        isam2_iterations: ISAM2 steps per `PoseGraph.update()` (>= 1).
+        final_pass: batch pass of `optimize_final()`: Levenberg-Marquardt with the robust loop
+            kernel, graduated non-convexity (odometry and priors known inliers, loops plain
+            Gaussian under the GNC loss), or nothing.
+        lm_max_iterations: Levenberg-Marquardt iteration cap (also inside GNC).
+        lm_relative_error_tol: Levenberg-Marquardt relative error decrease to stop at.
+        gnc_loss: GNC surrogate loss: truncated least squares or Geman-McClure.
+        gnc_inlier_probability: chi-square probability defining the GNC inlier threshold.
+    """
+
+    prior_sigmas: tuple[float, float, float] = DEFAULT_PRIOR_SIGMAS
+    loop_kernel: LoopKernel = "cauchy"
+    loop_kernel_width: float = DEFAULT_LOOP_KERNEL_WIDTH
+    isam2_relinearize_threshold: float = DEFAULT_ISAM2_RELINEARIZE_THRESHOLD
+    isam2_relinearize_skip: int = DEFAULT_ISAM2_RELINEARIZE_SKIP
+    isam2_iterations: int = DEFAULT_ISAM2_ITERATIONS
+    final_pass: FinalPass = "gnc"
+    lm_max_iterations: int = DEFAULT_LM_MAX_ITERATIONS
+    lm_relative_error_tol: float = DEFAULT_LM_RELATIVE_ERROR_TOL
+    gnc_loss: GncLoss = "tls"
+    gnc_inlier_probability: float = DEFAULT_GNC_INLIER_PROBABILITY
+
+    def __post_init__(self) -> None:
+        if len(self.prior_sigmas) != POSE_DIM or not all(
+            np.isfinite(s) and s > 0 for s in self.prior_sigmas
+        ):
+            raise ConfigError(
+                f"graph.prior_sigmas: need 3 positive numbers, got {self.prior_sigmas}"
+            )
+        if self.loop_kernel not in ("cauchy", "huber", "none"):
+            raise ConfigError(f"graph.loop_kernel: {self.loop_kernel!r} is not cauchy|huber|none")
+        if self.final_pass not in ("lm", "gnc", "none"):
+            raise ConfigError(f"graph.final_pass: {self.final_pass!r} is not lm|gnc|none")
+        if self.gnc_loss not in ("tls", "gm"):
+            raise ConfigError(f"graph.gnc_loss: {self.gnc_loss!r} is not tls|gm")
+        if not (
+            np.isfinite(self.isam2_relinearize_threshold) and self.isam2_relinearize_threshold >= 0
+        ):
+            raise ConfigError(
+                "graph.isam2_relinearize_threshold: must be >= 0, "
+                f"got {self.isam2_relinearize_threshold}"
+            )
+        positive = {
+            "loop_kernel_width": self.loop_kernel_width,
+            "isam2_relinearize_skip": self.isam2_relinearize_skip,
+            "isam2_iterations": self.isam2_iterations,
+            "lm_max_iterations": self.lm_max_iterations,
+            "lm_relative_error_tol": self.lm_relative_error_tol,
+        }
+        for name, value in positive.items():
+            if not (np.isfinite(value) and value > 0):
+                raise ConfigError(f"graph.{name}: must be positive, got {getattr(self, name)}")
+        if not 0.0 < self.gnc_inlier_probability < 1.0:
+            raise ConfigError(
+                "graph.gnc_inlier_probability: must be in (0, 1), "
+                f"got {self.gnc_inlier_probability}"
+            )
+
+
+class LoopConstraint(NamedTuple):
+    """A verified loop: the pose of keyframe j in the frame of keyframe i, with its covariance.
+
+    Attributes:
+        i: key of the reference (usually the query) keyframe.
+        j: key of the other keyframe.
+        measurement: (3,) T_i^-1 T_j `(x [m], y [m], yaw [rad])`.
+        covariance: (3, 3) of the measurement, tangent order (x, y, yaw), frame of the measurement.
+    """
+
+    i: int
+    j: int
+    measurement: ArrayLike
+    covariance: ArrayLike
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """A relative-pose factor of the graph (odometry or loop), as stored by `PoseGraph`.
+
+    Attributes:
+        kind: "odometry" or "loop".
+        i, j: keyframe keys.
+        measurement: (3,) T_i^-1 T_j.
+        covariance: (3, 3) measurement covariance (tangent order x, y, yaw).
+    """
+
+    kind: ConstraintKind
+    i: int
+    j: int
+    measurement: FloatArray
+    covariance: FloatArray
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A prior factor: keyframe `key` is at `pose` (3,) T_world_key with `covariance` (3, 3)."""
+
+    key: int
+    pose: FloatArray
+    covariance: FloatArray
+
+
+# --------------------------------------------------------------------------- validation / models
+
+
+def as_pose(value: ArrayLike, what: str) -> FloatArray:
+    """Return `value` as a finite (3,) float64 pose; GraphError naming `what` otherwise."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (POSE_DIM,):
+        raise GraphError(f"{what}: expected shape (3,), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise GraphError(f"{what}: not finite: {arr}")
+    return arr.copy()
+
+
+def as_covariance(value: ArrayLike, what: str) -> FloatArray:
+    """Return `value` as a symmetric positive definite (3, 3) covariance; GraphError otherwise.
+
+    A matrix symmetric to `SYMMETRY_TOLERANCE` (relative) is symmetrised exactly.
+    """
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (POSE_DIM, POSE_DIM):
+        raise GraphError(f"{what}: expected a (3, 3) matrix, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise GraphError(f"{what}: not finite")
+    scale = float(np.max(np.abs(arr)))
+    if scale == 0.0 or np.max(np.abs(arr - arr.T)) > SYMMETRY_TOLERANCE * scale:
+        raise GraphError(f"{what}: not a symmetric positive definite matrix:\n{arr}")
+    arr = 0.5 * (arr + arr.T)
+    try:
+        np.linalg.cholesky(arr)
+    except np.linalg.LinAlgError:
+        raise GraphError(f"{what}: not positive definite:\n{arr}") from None
+    return arr
+
+
+def _key(value: int, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise GraphError(f"{what}: a keyframe key is a non-negative integer, got {value!r}")
+    return int(value)
+
+
+def gaussian_noise(covariance: ArrayLike) -> gtsam.noiseModel.Base:
+    """A GTSAM Gaussian noise model of a (3, 3) SPD covariance (validated)."""
+    return gtsam.noiseModel.Gaussian.Covariance(as_covariance(covariance, "covariance"))
+
+
+def loop_noise(
+    covariance: ArrayLike,
+    kernel: LoopKernel = "cauchy",
+    kernel_width: float = DEFAULT_LOOP_KERNEL_WIDTH,
+) -> gtsam.noiseModel.Base:
+    """The noise model of a loop factor: Gaussian(covariance) under a robust kernel.
+
+    Args:
+        covariance: (3, 3) SPD covariance of the loop measurement.
+        kernel: "cauchy", "huber" or "none" (plain Gaussian).
+        kernel_width: kernel parameter k in standard deviations (whitened units).
+    """
+    base = gaussian_noise(covariance)
+    estimator = _m_estimator(kernel, kernel_width)
+    return base if estimator is None else gtsam.noiseModel.Robust.Create(estimator, base)
+
+
+def _m_estimator(kernel: str, width: float) -> gtsam.noiseModel.mEstimator.Base | None:
+    if kernel == "cauchy":
+        return gtsam.noiseModel.mEstimator.Cauchy.Create(width)
+    if kernel == "huber":
+        return gtsam.noiseModel.mEstimator.Huber.Create(width)
+    if kernel == "none":
+        return None
+    raise GraphError(f"unknown robust kernel {kernel!r} (cauchy|huber|none)")
+
+
+def _pose2(pose: FloatArray) -> gtsam.Pose2:
+    return gtsam.Pose2(float(pose[0]), float(pose[1]), float(pose[2]))
+
+
+def _between_factor(c: Constraint, noise: gtsam.noiseModel.Base) -> gtsam.BetweenFactorPose2:
+    return gtsam.BetweenFactorPose2(c.i, c.j, _pose2(c.measurement), noise)
+
+
+def _prior_factor(p: Prior) -> gtsam.PriorFactorPose2:
+    return gtsam.PriorFactorPose2(p.key, _pose2(p.pose), gaussian_noise(p.covariance))
+
+
+def add_loop_factors(
+    graph: gtsam.NonlinearFactorGraph,
+    loops: Iterable[LoopConstraint | tuple[int, int, ArrayLike, ArrayLike]],
+    kernel: LoopKernel = "cauchy",
+    kernel_width: float = DEFAULT_LOOP_KERNEL_WIDTH,
+    key: Callable[[int], int] | None = None,
+) -> list[int]:
+    """Add verified loop constraints to a user's own GTSAM graph as robust between-factors.
+
+    Args:
+        graph: the user's `gtsam.NonlinearFactorGraph` (modified in place).
+        loops: (i, j, measurement (3,), covariance (3, 3)) items, e.g. `LoopConstraint`s;
+            measurement = pose of j in the frame of i.
+        kernel: robust kernel "cauchy", "huber" or "none".
+        kernel_width: kernel parameter in standard deviations.
+        key: maps a keyframe index to the user's GTSAM key (e.g. `gtsam.symbol_shorthand.X`);
+            identity by default.
+
+    Returns:
+        The indices of the added factors in `graph` (e.g. to leave them out of GNC known inliers).
+    """
+    to_key = key if key is not None else (lambda k: k)
+    added: list[int] = []
+    for n, (i, j, measurement, covariance) in enumerate(loops):
+        z = as_pose(measurement, f"loop {n} ({i} -> {j}) measurement")
+        noise = loop_noise(as_covariance(covariance, f"loop {n} covariance"), kernel, kernel_width)
+        added.append(graph.size())
+        graph.add(gtsam.BetweenFactorPose2(to_key(i), to_key(j), _pose2(z), noise))
+    return added
+
+
+def relative_pose_covariance(
+    pose_i: ArrayLike, pose_j: ArrayLike, joint_covariance: ArrayLike
+) -> FloatArray:
+    """First-order covariance (3, 3) of T_i^-1 T_j given the (6, 6) joint covariance of (i, j).
+
+    The joint covariance is GTSAM's (blocks i then j, each in its own body frame); the result is in
+    the frame of the relative pose. Jacobians of `between`: d/di = -Ad((T_i^-1 T_j)^-1), d/dj = I.
+    """
+    rel = _pose2(se2.between(pose_i, pose_j))
+    h = np.hstack([-rel.inverse().AdjointMap(), np.eye(POSE_DIM)])
+    cov = h @ np.asarray(joint_covariance, dtype=np.float64) @ h.T
+    return 0.5 * (cov + cov.T)
+
+
+# --------------------------------------------------------------------------- the graph
+
+
+@dataclass
+class _SolverState:
+    """Bookkeeping of what ISAM2 holds."""
+
+    isam: gtsam.ISAM2
+    keys: set[int] = field(default_factory=set)
+    prior_slots: list[int] = field(default_factory=list)
+    constraint_slots: dict[int, int] = field(default_factory=dict)  # constraint id -> slot
+    cache: dict[int, FloatArray] | None = None  # key -> estimate; None = stale
+
+
+class PoseGraph:
+    """An SE(2) keyframe pose graph optimised incrementally by ISAM2.
+
+    Typical use (keys increase with time):
+
+        graph = PoseGraph(GraphConfig())
+        graph.add_keyframe(0, (0, 0, 0))
+        for k, (odom, odom_cov) in enumerate(motions, start=1):
+            graph.add_keyframe(k, graph.predict(k - 1, odom))
+            graph.add_odometry(k - 1, k, odom, odom_cov)
+            graph.update()                    # k is now in ISAM2: marginals available
+            for m, z, z_cov in verified_loops(k):
+                if graph.mahalanobis(k, m, z, z_cov) < gate:
+                    graph.add_loop(k, m, z, z_cov)
+            graph.update()                    # no-op step when no loop was added
+        poses = graph.optimize_final()        # (N, 3), key order
+
+    `estimates()` returns the latest solution: the final pass's until the graph changes, else
+    ISAM2's; keyframes not yet in the solver report their initial guess.
+    """
+
+    def __init__(self, config: GraphConfig | None = None) -> None:
+        self.config = config if config is not None else GraphConfig()
+        self._initial: dict[int, FloatArray] = {}
+        self._first_key: int | None = None
+        self._priors: list[Prior] = []
+        self._constraints: list[Constraint] = []
+        self._active: list[bool] = []
+        self._pending_priors: list[int] = []
+        self._pending_constraints: list[int] = []
+        self._pending_removals: list[int] = []
+        self._parent: dict[int, int] = {}  # union-find over keys connected by factors
+        self._final: dict[int, FloatArray] | None = None  # key -> final-pass estimate
+        self._loop_weights: dict[int, float] = {}
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(self.config.isam2_relinearize_threshold)
+        params.relinearizeSkip = self.config.isam2_relinearize_skip
+        self._solver = _SolverState(isam=gtsam.ISAM2(params))
+
+    # ----------------------------------------------------------------- building
+
+    def add_keyframe(self, key: int, initial_guess: ArrayLike) -> None:
+        """Add keyframe `key` with its initial guess (3,) T_world_key (the linearisation point).
+
+        Pass a guess consistent with the current estimate, e.g. `predict(previous, odometry)`.
+        """
+        key = _key(key, "add_keyframe")
+        if key in self._initial:
+            raise GraphError(f"keyframe {key} added twice")
+        self._initial[key] = as_pose(initial_guess, f"keyframe {key} initial guess")
+        self._parent[key] = key
+        if self._first_key is None:
+            self._first_key = key
+        self._final = None
+
+    def add_prior(self, key: int, pose: ArrayLike, covariance: ArrayLike) -> None:
+        """Add a prior: keyframe `key` is at `pose` (3,) T_world_key with `covariance` (3, 3)."""
+        key = self._require(key, "add_prior")
+        prior = Prior(key, as_pose(pose, f"prior on {key}"), as_covariance(covariance, "prior"))
+        self._priors.append(prior)
+        self._pending_priors.append(len(self._priors) - 1)
+        self._final = None
+
+    def add_odometry(self, i: int, j: int, measurement: ArrayLike, covariance: ArrayLike) -> int:
+        """Add an odometry factor: `measurement` (3,) = T_i^-1 T_j with `covariance` (3, 3).
+
+        Returns the constraint id.
+        """
+        return self._add_constraint("odometry", i, j, measurement, covariance)
+
+    def add_loop(self, i: int, j: int, measurement: ArrayLike, covariance: ArrayLike) -> int:
+        """Add a loop factor (robust kernel of the config): `measurement` (3,) = T_i^-1 T_j.
+
+        Returns the loop's constraint id, for `remove_loop` and `loop_weights`.
+        """
+        return self._add_constraint("loop", i, j, measurement, covariance)
+
+    def remove_loop(self, loop_id: int) -> None:
+        """Disable a loop factor; ISAM2 drops it at the next `update()`."""
+        if not 0 <= loop_id < len(self._constraints) or self._constraints[loop_id].kind != "loop":
+            raise GraphError(f"no loop with id {loop_id}")
+        if not self._active[loop_id]:
+            return
+        self._active[loop_id] = False
+        slot = self._solver.constraint_slots.pop(loop_id, None)
+        if slot is not None:
+            self._pending_removals.append(slot)
+        self._final = None
+
+    def _add_constraint(
+        self, kind: ConstraintKind, i: int, j: int, measurement: ArrayLike, covariance: ArrayLike
+    ) -> int:
+        i = self._require(i, f"add_{kind}")
+        j = self._require(j, f"add_{kind}")
+        if i == j:
+            raise GraphError(f"{kind} factor from keyframe {i} to itself")
+        what = f"{kind} {i} -> {j}"
+        c = Constraint(
+            kind,
+            i,
+            j,
+            as_pose(measurement, f"{what} measurement"),
+            as_covariance(covariance, f"{what} covariance"),
+        )
+        self._constraints.append(c)
+        self._active.append(True)
+        self._pending_constraints.append(len(self._constraints) - 1)
+        self._union(i, j)
+        self._final = None
+        return len(self._constraints) - 1
+
+    def _require(self, key: int, what: str) -> int:
+        key = _key(key, what)
+        if key not in self._initial:
+            raise GraphError(f"{what}: keyframe {key} was never added")
+        return key
+
+    # ----------------------------------------------------------------- union-find (anchoring)
+
+    def _root(self, key: int) -> int:
+        root = key
+        while self._parent[root] != root:
+            root = self._parent[root]
+        while self._parent[key] != root:  # path compression
+            self._parent[key], key = root, self._parent[key]
+        return root
+
+    def _union(self, a: int, b: int) -> None:
+        ra, rb = self._root(a), self._root(b)
+        if ra != rb:
+            self._parent[max(ra, rb)] = min(ra, rb)
+
+    def _ensure_anchor(self) -> None:
+        if not self._priors and self._first_key is not None and self._constraints:
+            key = self._first_key
+            sigmas = np.asarray(self.config.prior_sigmas, dtype=np.float64)
+            log.debug("anchoring keyframe %d with the default prior %s", key, sigmas)
+            self.add_prior(key, self._initial[key], np.diag(sigmas**2))
+
+    def _check_anchored(self, keys: Iterable[int]) -> None:
+        anchored = {self._root(p.key) for p in self._priors}
+        loose = sorted(k for k in set(keys) if self._root(k) not in anchored)
+        if loose:
+            shown = ", ".join(map(str, loose[:10])) + (" ..." if len(loose) > 10 else "")
+            raise GraphError(
+                f"keyframes {shown} are not connected to any keyframe with a prior "
+                "(add the odometry that links them first)"
+            )
+
+    # ----------------------------------------------------------------- optimisation
+
+    def update(self) -> None:
+        """Run ISAM2 with only the factors and keyframes added (or loops removed) since the last
+        call. With nothing new it is one more relinearisation step. Keyframes that no factor uses
+        yet stay pending (their estimate is their initial guess).
+
+        Raises GraphError when a new factor touches keyframes not connected to a prior, or when
+        GTSAM fails (after the latter the ISAM2 state is undefined: rebuild the graph)."""
+        self._ensure_anchor()
+        priors = [self._priors[n] for n in self._pending_priors]
+        constraints = [n for n in self._pending_constraints if self._active[n]]
+        self._check_anchored(
+            [p.key for p in priors]
+            + [k for n in constraints for k in (self._constraints[n].i, self._constraints[n].j)]
+        )
+        factors = gtsam.NonlinearFactorGraph()
+        for p in priors:
+            factors.add(_prior_factor(p))
+        for n in constraints:
+            factors.add(self._factor(n, robust=True))
+        values = gtsam.Values()
+        new_keys = sorted(
+            {p.key for p in priors}.union(
+                *({self._constraints[n].i, self._constraints[n].j} for n in constraints)
+            )
+            - self._solver.keys
+        )
+        for key in new_keys:
+            values.insert(key, _pose2(self._initial[key]))
+        if factors.size() == 0 and not self._pending_removals and not self._solver.keys:
+            return
+        isam = self._solver.isam
+        try:
+            result = isam.update(factors, values, list(self._pending_removals))
+            for _ in range(self.config.isam2_iterations - 1):
+                isam.update()
+        except RuntimeError as exc:  # GTSAM's IndeterminantLinearSystemException and friends
+            raise GraphError(f"ISAM2 update failed: {exc}") from None
+        slots = list(result.getNewFactorsIndices())
+        self._solver.prior_slots.extend(slots[: len(priors)])
+        self._solver.constraint_slots.update(zip(constraints, slots[len(priors) :], strict=True))
+        self._solver.keys.update(new_keys)
+        self._pending_priors.clear()
+        self._pending_constraints.clear()
+        self._pending_removals.clear()
+        self._solver.cache = None
+        self._final = None
+
+    def optimize_final(self) -> FloatArray:
+        """Batch pass over the whole graph from the current estimate; returns (N, 3) in key order.
+
+        "lm": Levenberg-Marquardt, loops under the robust kernel. "gnc": graduated non-convexity
+        with odometry and priors as known inliers and loops plain Gaussian (GNC supplies the robust
+        loss); loops whose GNC weight ends near 0 are the rejected ones (`loop_weights()`).
+        "none": returns `estimates()`. ISAM2 is not modified.
+        """
+        cfg = self.config
+        if cfg.final_pass == "none":
+            return self.estimates()
+        self._ensure_anchor()
+        active = [n for n, on in enumerate(self._active) if on]
+        keys_used = {p.key for p in self._priors}.union(
+            *({self._constraints[n].i, self._constraints[n].j} for n in active)
+        )
+        self._check_anchored(keys_used)
+        if not keys_used:
+            return self.estimates()
+        use_gnc = cfg.final_pass == "gnc"
+        graph = gtsam.NonlinearFactorGraph()
+        for p in self._priors:
+            graph.add(_prior_factor(p))
+        factor_of: dict[int, int] = {}
+        for n in active:
+            factor_of[n] = graph.size()
+            graph.add(self._factor(n, robust=not use_gnc))
+        current = dict(zip(self.keys(), self.estimates(), strict=True))
+        initial = gtsam.Values()
+        for key in sorted(keys_used):
+            initial.insert(key, _pose2(current[key]))
+        lm = gtsam.LevenbergMarquardtParams()
+        lm.setMaxIterations(cfg.lm_max_iterations)
+        lm.setRelativeErrorTol(cfg.lm_relative_error_tol)
+        lm.setAbsoluteErrorTol(DEFAULT_LM_ABSOLUTE_ERROR_TOL)
+        loops = [n for n in active if self._constraints[n].kind == "loop"]
+        try:
+            if use_gnc and loops:
+                params = gtsam.GncLMParams(lm)
+                loss = gtsam.GncLossType.TLS if cfg.gnc_loss == "tls" else gtsam.GncLossType.GM
+                params.setLossType(loss)
+                loop_factors = {factor_of[n] for n in loops}
+                params.setKnownInliers([f for f in range(graph.size()) if f not in loop_factors])
+                optimizer = gtsam.GncLMOptimizer(graph, initial, params)
+                optimizer.setInlierCostThresholdsAtProbability(cfg.gnc_inlier_probability)
+                result = optimizer.optimize()
+                weights = np.asarray(optimizer.getWeights(), dtype=np.float64)
+                self._loop_weights = {n: float(weights[factor_of[n]]) for n in loops}
+            else:
+                result = gtsam.LevenbergMarquardtOptimizer(graph, initial, lm).optimize()
+                self._loop_weights = {n: self._kernel_weight(n, result) for n in loops}
+        except RuntimeError as exc:
+            raise GraphError(f"final {cfg.final_pass} pass failed: {exc}") from None
+        rejected = sum(w < 0.5 for w in self._loop_weights.values())
+        log.info(
+            "final %s pass: %d keyframes, %d loops (%d with weight < 0.5), error %.6g -> %.6g",
+            cfg.final_pass,
+            len(keys_used),
+            len(loops),
+            rejected,
+            graph.error(initial),
+            graph.error(result),
+        )
+        for key in keys_used:
+            current[key] = _pose_of(result.atPose2(key))
+        self._final = current
+        return self.estimates()
+
+    def _factor(self, n: int, robust: bool) -> gtsam.BetweenFactorPose2:
+        c = self._constraints[n]
+        if c.kind == "loop" and robust:
+            noise = loop_noise(c.covariance, self.config.loop_kernel, self.config.loop_kernel_width)
+        else:
+            noise = gaussian_noise(c.covariance)
+        return _between_factor(c, noise)
+
+    def _kernel_weight(self, n: int, values: gtsam.Values) -> float:
+        c = self._constraints[n]
+        z = _pose2(c.measurement)
+        error = gtsam.Pose2.Logmap(z.between(values.atPose2(c.i).between(values.atPose2(c.j))))
+        distance = float(np.sqrt(error @ np.linalg.solve(c.covariance, error)))
+        estimator = _m_estimator(self.config.loop_kernel, self.config.loop_kernel_width)
+        return 1.0 if estimator is None else float(estimator.weight(distance))
+
+    # ----------------------------------------------------------------- queries
+
+    def keys(self) -> list[int]:
+        """Keyframe keys in increasing order (the row order of `estimates()`)."""
+        return sorted(self._initial)
+
+    def __len__(self) -> int:
+        return len(self._initial)
+
+    def initial_values(self) -> FloatArray:
+        """(N, 3) initial guesses T_world_key in key order."""
+        return np.array([self._initial[k] for k in self.keys()], dtype=np.float64).reshape(-1, 3)
+
+    def _solver_estimates(self) -> dict[int, FloatArray]:
+        """Key -> ISAM2 estimate (3,), computed once per update."""
+        if self._solver.cache is None:
+            values = self._solver.isam.calculateEstimate()
+            keys = sorted(self._solver.keys)
+            poses = np.asarray(gtsam.utilities.extractPose2(values), dtype=np.float64)
+            self._solver.cache = dict(zip(keys, poses.reshape(-1, POSE_DIM), strict=True))
+        return self._solver.cache
+
+    def _solver_pose(self, key: int) -> FloatArray:
+        """(3,) ISAM2 estimate of one key already in the solver, without a full-graph copy."""
+        if self._solver.cache is not None:
+            return self._solver.cache[key]
+        return _pose_of(self._solver.isam.calculateEstimatePose2(key))
+
+    def estimates(self) -> FloatArray:
+        """(N, 3) latest estimates T_world_key in key order (see the class docstring)."""
+        latest = self._final if self._final is not None else self._solver_estimates()
+        rows = [latest.get(k, self._initial[k]) for k in self.keys()]
+        return np.array(rows, dtype=np.float64).reshape(-1, POSE_DIM)
+
+    def estimate(self, key: int) -> FloatArray:
+        """(3,) latest estimate T_world_key of one keyframe (cheap: no full-graph copy)."""
+        key = self._require(key, "estimate")
+        if self._final is not None:
+            return self._final[key].copy()
+        if key in self._solver.keys:
+            return self._solver_pose(key).copy()
+        return self._initial[key].copy()
+
+    def predict(self, key: int, measurement: ArrayLike) -> FloatArray:
+        """(3,) estimate(key) composed with a relative `measurement` (3,): an initial guess for a
+        new keyframe seen from `key`."""
+        return se2.compose(self.estimate(key), as_pose(measurement, "predict measurement"))
+
+    def priors(self) -> list[Prior]:
+        """All priors (the automatic one included once the graph has been optimised)."""
+        return list(self._priors)
+
+    def constraints(self, include_removed: bool = False) -> list[tuple[int, Constraint]]:
+        """(constraint id, Constraint) of the odometry and loop factors, in insertion order."""
+        return [
+            (n, c) for n, c in enumerate(self._constraints) if include_removed or self._active[n]
+        ]
+
+    def loop_weights(self) -> dict[int, float]:
+        """Loop id -> weight in [0, 1] after the last `optimize_final()` (GNC weight, or the robust
+        kernel's weight at the solution for "lm"); < 0.5 means effectively rejected."""
+        return dict(self._loop_weights)
+
+    @property
+    def num_isam2_factors(self) -> int:
+        """Number of (non-removed) factors ISAM2 holds."""
+        return int(self._solver.isam.getFactorsUnsafe().nrFactors())
+
+    def _require_solved(self, key: int, what: str) -> int:
+        key = self._require(key, what)
+        if key not in self._solver.keys:
+            raise GraphError(f"{what}: keyframe {key} is not in the solver yet; call update()")
+        return key
+
+    def marginal_covariance(self, key: int) -> FloatArray:
+        """(3, 3) marginal covariance of keyframe `key` from ISAM2 (after `update()`), in the
+        keyframe's body frame, order (x [m], y [m], yaw [rad])."""
+        key = self._require_solved(key, "marginal_covariance")
+        return np.asarray(self._solver.isam.marginalCovariance(key), dtype=np.float64)
+
+    def relative_covariance(self, i: int, j: int) -> FloatArray:
+        """(3, 3) covariance of the estimated T_i^-1 T_j (ISAM2 joint marginal of i and j,
+        first-order propagation), in the frame of that relative pose."""
+        i = self._require_solved(i, "relative_covariance")
+        j = self._require_solved(j, "relative_covariance")
+        if i == j:
+            raise GraphError(f"relative_covariance: same keyframe {i} twice")
+        joint = self._solver.isam.jointMarginalCovariance([i, j])
+        full = np.block([[joint.at(i, i), joint.at(i, j)], [joint.at(j, i), joint.at(j, j)]])
+        return relative_pose_covariance(self._solver_pose(i), self._solver_pose(j), full)
+
+    def mahalanobis(self, i: int, j: int, measurement: ArrayLike, covariance: ArrayLike) -> float:
+        """Squared Mahalanobis distance of a proposed loop against the ISAM2 estimate.
+
+        With zhat = T_i^-1 T_j (estimate) and z = `measurement` (3,) of covariance `covariance`
+        (3, 3), the residual is e = Log(z^-1 zhat) (GTSAM's between-factor error) and
+
+            d2 = e^T (S_rel + A S_z A^T)^-1 e,   A = Ad(zhat^-1 z),
+
+        S_rel = `relative_covariance(i, j)`. First order (the Jacobian of Log is taken as I).
+        Compare with a chi-square quantile at 3 dof (e.g. 11.34 at 99 %).
+        """
+        z = _pose2(as_pose(measurement, "mahalanobis measurement"))
+        s_z = as_covariance(covariance, "mahalanobis covariance")
+        s_rel = self.relative_covariance(i, j)
+        zhat = _pose2(se2.between(self._solver_pose(i), self._solver_pose(j)))
+        error = gtsam.Pose2.Logmap(z.between(zhat))
+        a = zhat.between(z).AdjointMap()
+        s = s_rel + a @ s_z @ a.T
+        return float(error @ np.linalg.solve(s, error))
+
+
+def _pose_of(pose: gtsam.Pose2) -> FloatArray:
+    return np.array([pose.x(), pose.y(), pose.theta()], dtype=np.float64)
+
+
+def poses_array(values: gtsam.Values, keys: Sequence[int]) -> FloatArray:
+    """(len(keys), 3) Pose2 values of `keys` from a GTSAM `Values`."""
+    return np.array([_pose_of(values.atPose2(k)) for k in keys], dtype=np.float64).reshape(-1, 3)

@@ -1,0 +1,232 @@
+"""Settings of the raplace package: one frozen dataclass per stage, defaults in code.
+
+`RaPlaceConfig` groups the sections; each stage receives only its own section
+(`DescriptorExtractor(cfg.descriptor)`, `PlaceRecognizer(cfg.retrieval)`,
+`PoseEstimator(cfg.pose)`, `ScanContextRecognizer(cfg.scancontext)`). YAML overrides are merged by
+`radar_slam.config.merge`; `from_dict` below is the package's own strict reader (used to restore a
+saved database) so that raplace never imports radar_slam.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Literal, TypeVar
+
+from raplace import RaPlaceError
+
+T = TypeVar("T")
+
+IntensityTransform = Literal["linear", "log1p", "square"]
+MagnitudeTransform = Literal["linear", "sqrt", "log1p"]
+
+
+@dataclass(frozen=True)
+class PreprocessConfig:
+    """Clean-up of a polar scan before it is warped to a Cartesian image.
+
+    Applied after range bins are averaged down to the image cell size (which already reduces
+    speckle), in this order: per-range-bin median removal, near-range mask, noise floor,
+    intensity transform.
+
+    Attributes:
+        subtract_bin_median: subtract each range bin's median over azimuths (removes ring noise
+            and the part of the saturated near range that does not depend on azimuth); negative
+            values are clipped to 0.
+        min_range_m: bins closer than this are zeroed (saturated near range, the vehicle) [m].
+        noise_floor: intensity subtracted after the median removal, clipped at 0 (uint8 units).
+        intensity: "linear" keeps the (dB-like) uint8 scale, "log1p" compresses it, "square"
+            emphasises strong returns.
+    """
+
+    subtract_bin_median: bool = True
+    min_range_m: float = 3.0
+    noise_floor: float = 0.0
+    intensity: IntensityTransform = "linear"
+
+
+@dataclass(frozen=True)
+class ImageConfig:
+    """The Cartesian image a polar scan is warped to (see raplace.warp for the convention).
+
+    Attributes:
+        cell_m: pixel size [m]; range bins are first averaged to about this size.
+        max_range_m: radius of the disc of the scan kept [m]; everything farther is dropped so
+            the image content is a disc (rotation does not move content into square corners).
+        taper_fraction: the outer fraction of the disc radius is faded out with a cosine ramp
+            (reduces the spectral leakage of the disc rim).
+        subtract_mean: subtract the (taper-weighted) mean intensity of the disc before tapering,
+            so that the disc itself (identical in every scan) does not dominate the spectrum.
+    """
+
+    cell_m: float = 1.0
+    max_range_m: float = 80.0
+    taper_fraction: float = 0.1
+    subtract_mean: bool = True
+
+
+@dataclass(frozen=True)
+class DescriptorConfig:
+    """The translation-invariant RaPlace descriptor |DFT_l S(theta, l)|.
+
+    Attributes:
+        preprocess: polar clean-up settings.
+        image: Cartesian image settings (coarse cells are enough for place recognition).
+        n_theta: descriptor rows, angles theta in [0, pi) with spacing pi / n_theta.
+        theta_oversample: radial lines sampled per descriptor row; their magnitudes are averaged
+            (anti-aliasing along theta for the higher frequencies).
+        n_freq: descriptor columns, frequencies k_j = j * max_freq_cpm / n_freq, j = 1..n_freq
+            (the DC term carries no rotation information and is dropped).
+        max_freq_cpm: highest frequency along l [cycles per metre]; at most 1 / (2 cell_m).
+        pad_factor: zero padding of the image before its 2-D FFT (finer frequency grid for the
+            radial interpolation).
+        magnitude: transform of |S^(theta, k)| before z-normalisation.
+    """
+
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    image: ImageConfig = field(default_factory=ImageConfig)
+    n_theta: int = 120
+    theta_oversample: int = 2
+    n_freq: int = 32
+    max_freq_cpm: float = 0.25
+    pad_factor: int = 2
+    magnitude: MagnitudeTransform = "linear"
+
+
+@dataclass(frozen=True)
+class ExclusionConfig:
+    """Candidates a query may not match (the recent past of the same session).
+
+    Attributes:
+        recent_keyframes: the most recent N database entries are excluded.
+        recent_seconds: entries added less than this before the query time are excluded
+            (0 disables; entries without a time are subject to `recent_keyframes` only).
+    """
+
+    recent_keyframes: int = 50
+    recent_seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class RetrievalConfig:
+    """RaPlace database search with the mutable-threshold distance.
+
+    Attributes:
+        hierarchical: score every entry on low-resolution descriptors first, then re-score the
+            best ones and their neighbours at full resolution; False scores all at full resolution.
+        coarse_theta_pool: descriptor rows averaged into one low-resolution row.
+        coarse_n_freq: lowest frequency columns kept in the low-resolution descriptor.
+        coarse_candidates: best entries by low-resolution distance that are re-scored.
+        neighbour_radius: database neighbours (by insertion index) either side of each of them
+            that are re-scored too.
+        exclusion: which recent entries are never candidates.
+        loop_threshold: a loop is declared when the distance is below this (dimensionless,
+            1 - peak normalised cross-correlation; see raplace.scoring).
+    """
+
+    hierarchical: bool = True
+    coarse_theta_pool: int = 3
+    coarse_n_freq: int = 8
+    coarse_candidates: int = 25
+    neighbour_radius: int = 2
+    exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
+    loop_threshold: float = 0.25
+
+
+@dataclass(frozen=True)
+class PoseConfig:
+    """Relative pose (dx, dy, dyaw) between two scans from their sinogram spectra.
+
+    Attributes:
+        preprocess: polar clean-up settings.
+        image: Cartesian image settings (finer cells than the descriptor's).
+        n_theta: radial lines over [0, pi) used for rotation and per-angle shifts.
+        pad_factor: zero padding before the 2-D FFT; shifts are found modulo
+            pad_factor * image side.
+        whitening: exponent beta of the cross-power normalisation |P|^-beta along l
+            (0 = plain cross-correlation, 1 = phase correlation).
+        shift_upsample: upsampling of the per-angle correlation along l before the peak search.
+        rotation_peaks: theta-correlation peaks kept; each gives the hypotheses yaw, yaw - pi.
+        inlier_threshold_m: per-angle shifts farther than this from the fit are outliers [m].
+        refine_iterations: rotation refinements (maximise the aligned correlation around the
+            estimate, then re-solve the translation).
+    """
+
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    image: ImageConfig = field(default_factory=lambda: ImageConfig(cell_m=0.5, max_range_m=64.0))
+    n_theta: int = 180
+    pad_factor: int = 2
+    whitening: float = 0.5
+    shift_upsample: int = 2
+    rotation_peaks: int = 2
+    inlier_threshold_m: float = 1.0
+    refine_iterations: int = 1
+
+
+@dataclass(frozen=True)
+class ScanContextConfig:
+    """Radar Scan Context baseline (Kim et al.; the MulRan radar version).
+
+    Attributes:
+        preprocess: polar clean-up settings.
+        range_cell_m: range bins are averaged to about this size before the clean-up [m].
+        n_rings: radial bins of the context over [0, max_range_m].
+        n_sectors: angular bins over 360 deg (the column-shift resolution).
+        max_range_m: radius of the context [m].
+        n_candidates: nearest entries by ring key that are compared column-shift-wise.
+        exclusion: which recent entries are never candidates.
+        loop_threshold: a loop is declared when the distance (mean column cosine distance,
+            in [0, 1]) is below this.
+    """
+
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    range_cell_m: float = 0.5
+    n_rings: int = 20
+    n_sectors: int = 60
+    max_range_m: float = 80.0
+    n_candidates: int = 10
+    exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
+    loop_threshold: float = 0.3
+
+
+@dataclass(frozen=True)
+class RaPlaceConfig:
+    """All raplace settings, one section per stage."""
+
+    descriptor: DescriptorConfig = field(default_factory=DescriptorConfig)
+    retrieval: RetrievalConfig = field(default_factory=RetrievalConfig)
+    pose: PoseConfig = field(default_factory=PoseConfig)
+    scancontext: ScanContextConfig = field(default_factory=ScanContextConfig)
+
+
+def to_dict(config: Any) -> dict[str, Any]:
+    """A plain nested dict of a config dataclass (JSON/YAML ready)."""
+    return dataclasses.asdict(config)
+
+
+def from_dict(cls: type[T], data: dict[str, Any]) -> T:
+    """Build `cls` from a nested dict, strictly: unknown keys raise RaPlaceError.
+
+    Missing keys take the defaults; nested dataclass sections recurse; lists become tuples where
+    the field is a tuple. Values are not type-coerced beyond that (radar_slam.config.merge does
+    full validation of user files).
+    """
+    if not isinstance(data, dict):
+        raise RaPlaceError(f"{cls.__name__}: expected a mapping, got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    hints = typing.get_type_hints(cls, globalns=vars(sys.modules[cls.__module__]))
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise RaPlaceError(f"{cls.__name__}: unknown keys {unknown} (known: {sorted(fields)})")
+    values: dict[str, Any] = {}
+    for key, value in data.items():
+        hint = hints[key]
+        if dataclasses.is_dataclass(hint):
+            values[key] = from_dict(hint, value)  # type: ignore[arg-type]
+        elif typing.get_origin(hint) is tuple and isinstance(value, list):
+            values[key] = tuple(value)
+        else:
+            values[key] = value
+    return cls(**values)

@@ -1,0 +1,323 @@
+"""Relative pose of two scans from their sinogram spectra (RING-style), for loop verification.
+
+Notation: the query scan q and the map (candidate) scan m; the result T_q_m = (dx, dy, dyaw) is
+the map scan's pose in the query frame (x forward, y left, yaw CCW), so a point p_m of the map
+scan lies at R(dyaw) p_m + (dx, dy) in the query frame, and the sinograms satisfy
+
+    S_q(theta, l) = S_m(theta - dyaw, l - b(theta)),   b(theta) = dx cos theta + dy sin theta.
+
+Steps (all on spectra S^(theta, k) sampled from one 2-D FFT per image, raplace.descriptor):
+1. Rotation modulo pi: circular correlation along theta of the magnitudes |S^| (which ignore the
+   translation); the best `rotation_peaks` peaks, sub-bin. Each peak a gives two hypotheses, a
+   and a - pi (|S^| repeats every pi). The map spectrum at theta - a is sampled directly from its
+   2-D FFT (no interpolation along theta); the pi hypothesis is its complex conjugate.
+2. Translation per hypothesis: for each query angle theta_i, the cross-correlation along l of the
+   query row and the de-rotated map row (partially whitened cross-power spectrum) peaks at
+   b_i; [cos theta_i, sin theta_i] [dx, dy]^T = b_i is solved robustly (orthogonal-pair
+   hypotheses scored by truncated squared residuals, then least squares on the inliers).
+3. The hypothesis with the smallest truncated residual wins; optionally the rotation is refined by
+   maximising the aligned correlation and the translation re-solved.
+4. Quality: the normalised correlation of the two band-limited images after alignment,
+   computed from the spectra (Parseval; DC excluded), in [-1, 1].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+from numpy.typing import NDArray
+
+from raplace import RaPlaceError
+from raplace.config import PoseConfig
+from raplace.descriptor import ImageSpectrum, image_spectrum, radial_spectrum, unit_phasor
+from raplace.preprocess import CartesianImager
+from raplace.scoring import circular_peak, parabolic_vertex
+
+WHITENING_EPS = 1e-12
+"""Guard of the cross-power normalisation |P|^-beta."""
+REFINE_STEP_BINS = 0.25
+"""Rotation probe offset of the refinement, in theta bins (pi / n_theta)."""
+LEAST_SQUARES_ITERATIONS = 3
+"""Inlier re-selection rounds after the best orthogonal-pair hypothesis."""
+
+
+@dataclass(frozen=True)
+class RelativePose:
+    """Pose of the map (candidate) scan in the query scan's frame, with its support.
+
+    Attributes:
+        dx_m, dy_m: translation [m] (x forward, y left of the query scan).
+        dyaw_rad: rotation, CCW, in (-pi, pi] [rad].
+        quality: normalised correlation of the aligned band-limited images, in [-1, 1]
+            (about 1 for the same place, near 0 for unrelated scans).
+        residual_m: truncated RMS of the per-angle shift residuals [m]: residuals are capped at
+            `inlier_threshold_m`, so it lies in [0, inlier_threshold_m].
+        inlier_fraction: fraction of angles whose shift agrees with (dx, dy) within the threshold.
+        alternative_residual_m: the truncated residual of the best rejected hypothesis (the pi
+            ambiguity's other side, or another rotation peak) [m]; a clear win has
+            residual_m well below it.
+    """
+
+    dx_m: float
+    dy_m: float
+    dyaw_rad: float
+    quality: float
+    residual_m: float
+    inlier_fraction: float
+    alternative_residual_m: float
+
+    def as_array(self) -> NDArray[np.float64]:
+        """(3,) [dx_m, dy_m, dyaw_rad]."""
+        return np.array([self.dx_m, self.dy_m, self.dyaw_rad])
+
+
+@dataclass(frozen=True)
+class _Spectra:
+    """Query rows and the sampling context shared by every hypothesis."""
+
+    query: NDArray[np.complex64]  # (n_theta, n_freq) S^_q(theta_i, k_j)
+    map_fft: ImageSpectrum
+    thetas: NDArray[np.float64]  # (n_theta,) [rad], in [0, pi)
+    freqs: NDArray[np.float64]  # (n_freq,) [cycles/m], k_j = j * step, j = 0..size/2
+    period_m: float  # shifts along l are found modulo this [m]
+
+
+@dataclass(frozen=True)
+class _Hypothesis:
+    yaw: float
+    xy: NDArray[np.float64]
+    residual: float
+    inliers: NDArray[np.bool_]
+    rows: NDArray[np.complex64]  # de-rotated map rows at this yaw
+
+
+def wrap_angle(angle: float) -> float:
+    """Angle wrapped to (-pi, pi] [rad]."""
+    wrapped = float(np.mod(angle + np.pi, 2.0 * np.pi) - np.pi)
+    return np.pi if wrapped == -np.pi else wrapped
+
+
+def rotation_candidates(
+    query_rows: NDArray[np.complex64],
+    map_rows: NDArray[np.complex64],
+    freqs: NDArray[np.float64],
+    n_peaks: int,
+) -> NDArray[np.float64]:
+    """Rotations a modulo pi [rad] (best first) from magnitude correlation along theta.
+
+    Args:
+        query_rows, map_rows: (n_theta, n_freq) spectra at theta_i = i pi / n_theta.
+        freqs: (n_freq,) [cycles/m]; magnitudes are weighted by k (flattens the 1/k fall-off).
+        n_peaks: local maxima kept.
+    """
+    n_theta = query_rows.shape[0]
+    weight = freqs[None, :]
+    q = np.abs(query_rows) * weight
+    m = np.abs(map_rows) * weight
+    q -= q.mean(axis=0, keepdims=True)
+    m -= m.mean(axis=0, keepdims=True)
+    # C(s) = sum_theta q(theta) m(theta - s) peaks at s = a.
+    spectrum = np.sum(np.fft.rfft(q, axis=0) * np.conj(np.fft.rfft(m, axis=0)), axis=1)
+    corr = np.fft.irfft(spectrum, n=n_theta)
+    is_peak = (corr >= np.roll(corr, 1)) & (corr >= np.roll(corr, -1))
+    peaks = np.flatnonzero(is_peak)
+    peaks = peaks[np.argsort(corr[peaks])[::-1][:n_peaks]]
+    _, offset = parabolic_vertex(
+        corr[(peaks - 1) % n_theta], corr[peaks], corr[(peaks + 1) % n_theta]
+    )
+    return (peaks + offset) * (np.pi / n_theta)
+
+
+def per_angle_shifts(
+    query_rows: NDArray[np.complex64],
+    map_rows: NDArray[np.complex64],
+    period_m: float,
+    whitening: float,
+    upsample: int,
+) -> NDArray[np.float64]:
+    """Shift b_i [m] along l of each query row relative to the map row (same angle).
+
+    Args:
+        query_rows, map_rows: (n_theta, n_freq) spectra at k_j = j / period_m, j = 0..n_freq - 1
+            (n_freq - 1 = the grid's Nyquist index).
+        period_m: shifts are found modulo this; returned in [-period_m / 2, period_m / 2).
+        whitening: exponent beta of |P|^-beta.
+        upsample: correlation samples per grid step along l.
+    """
+    cross = query_rows * np.conj(map_rows)
+    if whitening > 0:
+        cross /= np.maximum(np.abs(cross), WHITENING_EPS) ** np.float32(whitening)
+    cross[:, 0] = 0.0  # DC: no shift information
+    n_l = 2 * (query_rows.shape[1] - 1) * upsample
+    corr = scipy.fft.irfft(cross, n=n_l, axis=1, workers=1)  # peaks at l = b_i
+    _, position = circular_peak(corr)
+    shifts = position * (period_m / n_l)
+    return np.mod(shifts + 0.5 * period_m, period_m) - 0.5 * period_m
+
+
+def fit_translation(
+    thetas: NDArray[np.float64], shifts: NDArray[np.float64], threshold_m: float
+) -> tuple[NDArray[np.float64], float, NDArray[np.bool_]]:
+    """Robust least squares of b_i = x cos theta_i + y sin theta_i.
+
+    Candidate solutions come from every pair of orthogonal angles (theta_i, theta_i + pi/2);
+    the one with the least truncated squared residual is refined by least squares on its inliers.
+
+    Args:
+        thetas: (n,) angles [rad] in [0, pi), n even and uniformly spaced.
+        shifts: (n,) b_i [m].
+        threshold_m: inlier bound on |residual| [m].
+
+    Returns:
+        ((x, y) [m], truncated RMS residual [m], inlier mask (n,)).
+    """
+    n = len(thetas)
+    half = n // 2
+    design = np.stack([np.cos(thetas), np.sin(thetas)], axis=1)  # (n, 2)
+    # Orthogonal pair (theta, theta + pi/2): b1 = x c + y s, b2 = -x s + y c.
+    c, s = design[:half, 0], design[:half, 1]
+    b1, b2 = shifts[:half], shifts[half : 2 * half]
+    pairs = np.stack([c * b1 - s * b2, s * b1 + c * b2], axis=1)  # (half, 2)
+    residuals = shifts[None, :] - pairs @ design.T  # (half, n)
+    cost = np.minimum(residuals**2, threshold_m**2).sum(axis=1)
+    xy = pairs[int(np.argmin(cost))]
+    for _ in range(LEAST_SQUARES_ITERATIONS):
+        inliers = np.abs(shifts - design @ xy) < threshold_m
+        if inliers.sum() < 2:
+            break
+        xy = np.linalg.lstsq(design[inliers], shifts[inliers], rcond=None)[0]
+    residual = shifts - design @ xy
+    inliers = np.abs(residual) < threshold_m
+    truncated = float(np.sqrt(np.mean(np.minimum(residual**2, threshold_m**2))))
+    return xy, truncated, inliers
+
+
+def aligned_correlation(
+    query_rows: NDArray[np.complex64],
+    map_rows: NDArray[np.complex64],
+    thetas: NDArray[np.float64],
+    freqs: NDArray[np.float64],
+    xy: NDArray[np.float64],
+) -> float:
+    """Normalised correlation of the query image and the map image moved by (xy, yaw).
+
+    `map_rows` are already de-rotated (sampled at theta - yaw). Polar Parseval: each sample is
+    weighted by k; the DC column is excluded (mean removal). Returns a value in [-1, 1].
+    """
+    weight = freqs[None, 1:].astype(np.float32)
+    q = query_rows[:, 1:]
+    m = map_rows[:, 1:]
+    shift = (xy[0] * np.cos(thetas) + xy[1] * np.sin(thetas))[:, None]
+    # S^_q = S^_m(theta - yaw) exp(-2 pi i k b): undo the translation phase.
+    phase = unit_phasor(2.0 * np.pi * freqs[None, 1:] * shift)
+    num = float(np.sum(weight * (q * np.conj(m) * phase).real, dtype=np.float64))
+    q_power = float(np.sum(weight * (q.real**2 + q.imag**2), dtype=np.float64))
+    m_power = float(np.sum(weight * (m.real**2 + m.imag**2), dtype=np.float64))
+    den = np.sqrt(q_power * m_power)
+    return num / den if den > 0 else 0.0
+
+
+def _solve(spectra: _Spectra, yaw: float, rows: NDArray, cfg: PoseConfig) -> _Hypothesis:
+    shifts = per_angle_shifts(
+        spectra.query, rows, spectra.period_m, cfg.whitening, cfg.shift_upsample
+    )
+    xy, residual, inliers = fit_translation(spectra.thetas, shifts, cfg.inlier_threshold_m)
+    return _Hypothesis(yaw=yaw, xy=xy, residual=residual, inliers=inliers, rows=rows)
+
+
+def _map_rows(spectra: _Spectra, yaw: float) -> NDArray[np.complex64]:
+    return radial_spectrum(spectra.map_fft, spectra.thetas - yaw, spectra.freqs)
+
+
+def _refine(spectra: _Spectra, best: _Hypothesis, cfg: PoseConfig) -> _Hypothesis:
+    """One rotation refinement: parabola through the aligned correlation at yaw +- step."""
+    step = REFINE_STEP_BINS * np.pi / cfg.n_theta
+    values = [
+        aligned_correlation(
+            spectra.query,
+            _map_rows(spectra, best.yaw + offset),
+            spectra.thetas,
+            spectra.freqs,
+            best.xy,
+        )
+        for offset in (-step, step)
+    ]
+    centre = aligned_correlation(spectra.query, best.rows, spectra.thetas, spectra.freqs, best.xy)
+    _, offset = parabolic_vertex(values[0], centre, values[1], limit=1.0)
+    yaw = best.yaw + float(offset) * step
+    refined = _solve(spectra, yaw, _map_rows(spectra, yaw), cfg)
+    return refined if refined.residual <= best.residual else best
+
+
+def relative_pose(
+    query_cart: NDArray, map_cart: NDArray, cell_m: float, cfg: PoseConfig
+) -> RelativePose:
+    """Pose of the map scan in the query scan's frame from two Cartesian images.
+
+    Args:
+        query_cart, map_cart: (n, n) images of the same grid (raplace.warp convention), e.g.
+            from `PoseEstimator.image`.
+        cell_m: pixel size [m].
+        cfg: pose settings (n_theta must be even).
+
+    Returns:
+        RelativePose (dx, dy, dyaw) = T_query_map with quality and residuals.
+    """
+    query_cart = np.asarray(query_cart)
+    if query_cart.shape != np.shape(map_cart):
+        raise RaPlaceError(f"image shapes differ: {query_cart.shape} vs {np.shape(map_cart)}")
+    if cfg.n_theta < 4 or cfg.n_theta % 2:
+        raise RaPlaceError(f"pose n_theta must be even and >= 4, got {cfg.n_theta}")
+    query_fft = image_spectrum(query_cart, cell_m, cfg.pad_factor)
+    map_fft = image_spectrum(map_cart, cell_m, cfg.pad_factor)
+    thetas = np.arange(cfg.n_theta) * (np.pi / cfg.n_theta)
+    freqs = np.arange(query_fft.size // 2 + 1) * query_fft.freq_step_cpm
+    spectra = _Spectra(
+        query=radial_spectrum(query_fft, thetas, freqs),
+        map_fft=map_fft,
+        thetas=thetas,
+        freqs=freqs,
+        period_m=1.0 / query_fft.freq_step_cpm,
+    )
+    map_same_angles = radial_spectrum(map_fft, thetas, freqs)
+    hypotheses: list[_Hypothesis] = []
+    for yaw in rotation_candidates(spectra.query, map_same_angles, freqs, cfg.rotation_peaks):
+        rows = _map_rows(spectra, float(yaw))
+        hypotheses.append(_solve(spectra, float(yaw), rows, cfg))
+        # S^(theta - yaw - pi, k) = conj S^(theta - yaw, k) for a real image.
+        hypotheses.append(_solve(spectra, float(yaw) + np.pi, np.conj(rows), cfg))
+    hypotheses.sort(key=lambda h: h.residual)
+    best = hypotheses[0]
+    alternative = hypotheses[1].residual if len(hypotheses) > 1 else float("nan")
+    for _ in range(cfg.refine_iterations):
+        best = _refine(spectra, best, cfg)
+    quality = aligned_correlation(spectra.query, best.rows, thetas, freqs, best.xy)
+    return RelativePose(
+        dx_m=float(best.xy[0]),
+        dy_m=float(best.xy[1]),
+        dyaw_rad=wrap_angle(best.yaw),
+        quality=quality,
+        residual_m=best.residual,
+        inlier_fraction=float(best.inliers.mean()),
+        alternative_residual_m=alternative,
+    )
+
+
+class PoseEstimator:
+    """Relative pose between two polar scans; caches the Cartesian warping maps."""
+
+    def __init__(self, cfg: PoseConfig) -> None:
+        self.cfg = cfg
+        self.imager = CartesianImager(cfg.preprocess, cfg.image)
+
+    def image(
+        self, polar: NDArray, azimuths_rad: NDArray[np.float64], range_resolution_m: float
+    ) -> NDArray[np.float32]:
+        """The pose-resolution Cartesian image of a scan (cache it to verify many candidates)."""
+        return self.imager(polar, azimuths_rad, range_resolution_m)
+
+    def estimate(self, query_image: NDArray, map_image: NDArray) -> RelativePose:
+        """T_query_map from two images made by `image`."""
+        return relative_pose(query_image, map_image, self.cfg.image.cell_m, self.cfg)

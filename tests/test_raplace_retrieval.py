@@ -1,0 +1,179 @@
+"""PlaceRecognizer: ranking, exclusion, save/load, hierarchical = exhaustive, reverse visits."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from raplace_scenes import angle_error, relative, render_cart, synthetic_world
+
+from raplace import RaPlaceError
+from raplace.config import (
+    DescriptorConfig,
+    ExclusionConfig,
+    RaPlaceConfig,
+    RetrievalConfig,
+    ScanContextConfig,
+    from_dict,
+    to_dict,
+)
+from raplace.descriptor import descriptor, z_normalise
+from raplace.retrieval import GrowingArray, PlaceRecognizer, candidate_mask
+from raplace.scancontext import ScanContextRecognizer
+
+WORLD_CELL_M = 0.25
+DESCRIPTOR = DescriptorConfig()
+NO_EXCLUSION = ExclusionConfig(recent_keyframes=0, recent_seconds=0.0)
+PATH_SPACING_M = 4.0
+PATH_LENGTH = 80
+
+
+def _random_descriptors(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return z_normalise(rng.standard_normal((n, DESCRIPTOR.n_theta, DESCRIPTOR.n_freq)))
+
+
+def _path_pose(s_m: float) -> tuple[float, float, float]:
+    """A closed 'stadium' route of about 320 m in the synthetic world; s_m is the arc length."""
+    angle = s_m / 51.0
+    return (51.0 * np.cos(angle), 51.0 * np.sin(angle) * 1.3, angle + np.pi / 2)
+
+
+@pytest.fixture(scope="module")
+def route():
+    """Keyframe descriptors along the route, and the world they were cut from."""
+    world = synthetic_world(1000, seed=5)  # 250 m x 250 m
+    poses = [_path_pose(i * PATH_SPACING_M) for i in range(PATH_LENGTH)]
+    descriptors = np.stack([_describe(world, p) for p in poses])
+    return world, poses, descriptors
+
+
+def _describe(world: np.ndarray, pose: tuple[float, float, float]) -> np.ndarray:
+    cart = render_cart(world, WORLD_CELL_M, pose, DESCRIPTOR.image.cell_m, 60.0)
+    return descriptor(cart, DESCRIPTOR.image.cell_m, DESCRIPTOR)
+
+
+def test_exact_copy_is_best_with_zero_distance() -> None:
+    descs = _random_descriptors(20, seed=0)
+    recognizer = PlaceRecognizer(RetrievalConfig(exclusion=NO_EXCLUSION))
+    recognizer.add_batch(descs, keys=np.arange(100, 120))
+    best = recognizer.query(np.roll(descs[7], 11, axis=0), k=1)[0]
+    assert (best.key, best.index) == (107, 7)
+    assert best.distance == pytest.approx(0.0, abs=1e-5)
+    # Rolling the query by +11 rows rotates its scene by +11 * 1.5 deg: the entry is at +16.5 deg.
+    assert np.rad2deg(best.yaw_rad) == pytest.approx(16.5, abs=1e-3)
+    assert best.yaw_period_rad == pytest.approx(np.pi)
+
+
+def test_k_results_are_ranked() -> None:
+    descs = _random_descriptors(30, seed=1)
+    recognizer = PlaceRecognizer(RetrievalConfig(exclusion=NO_EXCLUSION))
+    recognizer.add_batch(descs, keys=np.arange(30))
+    ranked = recognizer.query(descs[3], k=5)
+    assert len(ranked) == 5
+    assert ranked[0].key == 3
+    distances = [c.distance for c in ranked]
+    assert distances == sorted(distances)
+    assert len(recognizer.query(descs[3], k=100)) == 30
+
+
+def test_exclusion_window_recent_keyframes() -> None:
+    descs = _random_descriptors(10, seed=2)
+    recognizer = PlaceRecognizer(
+        RetrievalConfig(exclusion=ExclusionConfig(recent_keyframes=3, recent_seconds=0.0))
+    )
+    for i, desc in enumerate(descs):
+        recognizer.add(desc, key=i)
+    assert all(c.index < 7 for c in recognizer.query(descs[9], k=10))
+    assert len(recognizer.query(descs[9], k=10)) == 7
+    assert recognizer.query(descs[4], k=1)[0].key == 4
+
+
+def test_exclusion_window_seconds() -> None:
+    times = np.arange(10, dtype=float)
+    exclusion = ExclusionConfig(recent_keyframes=0, recent_seconds=4.5)
+    np.testing.assert_array_equal(
+        np.flatnonzero(candidate_mask(times, None, exclusion)), np.arange(5)
+    )
+    np.testing.assert_array_equal(
+        np.flatnonzero(candidate_mask(times, 20.0, exclusion)), np.arange(10)
+    )
+    descs = _random_descriptors(10, seed=3)
+    recognizer = PlaceRecognizer(RetrievalConfig(exclusion=exclusion))
+    recognizer.add_batch(descs, keys=np.arange(10), times_s=times)
+    assert {c.index for c in recognizer.query(descs[8], k=10, time_s=9.0)} == set(range(5))
+
+
+def test_save_load_round_trip(tmp_path) -> None:
+    descs = _random_descriptors(12, seed=4)
+    cfg = RetrievalConfig(coarse_candidates=2, neighbour_radius=1, exclusion=NO_EXCLUSION)
+    recognizer = PlaceRecognizer(cfg)
+    recognizer.add_batch(descs, keys=np.arange(12) * 1000, times_s=np.arange(12) * 0.25)
+    path = tmp_path / "raplace_db.npz"
+    recognizer.save(path)
+    loaded = PlaceRecognizer.load(path)
+    assert loaded.cfg == cfg
+    np.testing.assert_array_equal(loaded.keys, recognizer.keys)
+    np.testing.assert_allclose(loaded.descriptors(), descs, atol=1e-5)
+    query = descs[5] + 0.3 * _random_descriptors(1, seed=9)[0]
+    before, after = recognizer.query(query, k=4), loaded.query(query, k=4)
+    assert [c.key for c in after] == [c.key for c in before]
+    np.testing.assert_allclose([c.distance for c in after], [c.distance for c in before], atol=1e-6)
+    np.testing.assert_allclose([c.yaw_rad for c in after], [c.yaw_rad for c in before], atol=1e-6)
+    with pytest.raises(RaPlaceError):
+        ScanContextRecognizer.load(path)
+
+
+def test_empty_database_and_bad_shapes() -> None:
+    recognizer = PlaceRecognizer(RetrievalConfig())
+    assert recognizer.query(_random_descriptors(1, seed=0)[0]) == []
+    recognizer.add(_random_descriptors(1, seed=0)[0], key=1)
+    with pytest.raises(RaPlaceError):
+        recognizer.add(np.zeros((10, 10), np.float32), key=2)
+    with pytest.raises(RaPlaceError):
+        recognizer.query(np.zeros((10, 10), np.float32))
+
+
+def test_hierarchical_matches_exhaustive_and_finds_reverse_visits(route) -> None:
+    world, poses, descriptors = route
+    hierarchical = PlaceRecognizer(
+        RetrievalConfig(coarse_candidates=3, neighbour_radius=1, exclusion=NO_EXCLUSION)
+    )
+    exhaustive = PlaceRecognizer(RetrievalConfig(hierarchical=False, exclusion=NO_EXCLUSION))
+    keys = np.arange(PATH_LENGTH)
+    hierarchical.add_batch(descriptors, keys)
+    exhaustive.add_batch(descriptors, keys)
+    rng = np.random.default_rng(7)
+    for _ in range(8):
+        s = rng.uniform(0, (PATH_LENGTH - 1) * PATH_SPACING_M)
+        x, y, yaw = _path_pose(s)
+        turn = rng.choice([0.0, np.pi])  # same or opposite driving direction
+        query_pose = (x + rng.uniform(-2, 2), y + rng.uniform(-2, 2), yaw + turn)
+        query = _describe(world, query_pose)
+        fast = hierarchical.query(query, k=1)[0]
+        slow = exhaustive.query(query, k=1)[0]
+        assert fast.index == slow.index
+        assert fast.distance == pytest.approx(slow.distance)
+        assert abs(fast.index - s / PATH_SPACING_M) <= 1.5
+        truth = relative(query_pose, poses[fast.index])[2]
+        assert np.rad2deg(angle_error(2 * fast.yaw_rad, 2 * truth)) / 2 < 2.0
+
+
+def test_growing_array_appends() -> None:
+    grow = GrowingArray((2,), np.float64)
+    for i in range(200):
+        grow.append(np.array([i, -i]))
+    assert len(grow) == 200
+    np.testing.assert_array_equal(grow.values[:, 0], np.arange(200))
+
+
+def test_config_round_trip_is_strict() -> None:
+    cfg = RaPlaceConfig()
+    assert from_dict(RaPlaceConfig, to_dict(cfg)) == cfg
+    changed = from_dict(RaPlaceConfig, {"retrieval": {"exclusion": {"recent_keyframes": 7}}})
+    assert changed.retrieval.exclusion.recent_keyframes == 7
+    assert changed.descriptor == cfg.descriptor
+    with pytest.raises(RaPlaceError):
+        from_dict(RaPlaceConfig, {"retrieval": {"coarse_candidatez": 3}})
+    assert dataclasses.is_dataclass(ScanContextConfig())

@@ -1,0 +1,193 @@
+"""Settings of the phase-correlation odometry: one frozen dataclass per step, defaults in code.
+
+`OdometryConfig` is the stage's whole section (`radar_slam.config.merge` applies YAML overrides to
+it; unknown keys are errors there). Every tunable number of the odometry lives here; the modules
+hold only physical constants. The dataclasses are frozen and hashable, so derived geometry (window,
+sampling grids) can be cached per config.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class PreprocessConfig:
+    """Polar-scan conditioning before any Cartesian image is made.
+
+    Attributes:
+        bin_size_m: range bins are averaged down to about this size [m] (speckle suppression and
+            speed); the finest Cartesian cell should not be smaller.
+        min_range_m: returns nearer than this are zeroed [m] (saturated near range, vehicle body).
+        max_range_m: returns farther than this are dropped [m].
+        ring_noise_removal: subtract each range bin's median over azimuths (constant-range bands
+            that do not move with the vehicle).
+        noise_floor_sigmas: per azimuth, subtract mean + this many standard deviations of the
+            row (a CFAR-like noise floor); negative values disable the floor.
+        gamma: the remaining intensities are raised to this power (1 keeps them linear).
+    """
+
+    bin_size_m: float = 0.2
+    min_range_m: float = 3.0
+    max_range_m: float = 150.0
+    ring_noise_removal: bool = True
+    noise_floor_sigmas: float = 0.0
+    gamma: float = 1.0
+
+
+@dataclass(frozen=True)
+class LevelConfig:
+    """One Cartesian image level.
+
+    Attributes:
+        cell_m: pixel size [m].
+        size_px: image side [pixels] (the image spans +-size_px * cell_m / 2).
+        taper_fraction: the radial apodisation window falls from 1 to 0 over this outer fraction
+            of the image's inscribed radius (a Tukey window in radius).
+    """
+
+    cell_m: float
+    size_px: int
+    taper_fraction: float = 0.3
+
+
+@dataclass(frozen=True)
+class RotationConfig:
+    """Fourier-Mellin rotation: polar resampling of the coarse image's magnitude spectrum.
+
+    Attributes:
+        n_angles: samples of the spectrum's angle over [0, pi) (resolution pi / n_angles).
+        n_radii: samples of the spectrum's radius.
+        min_frequency: lowest spectral radius used, as a fraction of Nyquist (skips the
+            window-dominated low frequencies).
+        max_frequency: highest spectral radius used, as a fraction of Nyquist.
+        log_radius: sample the radius logarithmically (log-polar, PhaRaO) instead of linearly.
+        smoothing_bins: Gaussian width [angle bins] of the correlation peak (low-pass on the
+            cross-power spectrum), for a smooth peak and a sub-bin fit.
+        refine: after the coarse translation, refine the rotation by angular correlation of
+            both scans resampled on a polar grid about the reference sensor (translation
+            removed): Fourier-Mellin alone is biased toward zero by the fixed pixel grid.
+        refine_n_angles: angular samples of that polar grid over a full turn.
+        refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
+        refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
+    """
+
+    n_angles: int = 720
+    n_radii: int = 96
+    min_frequency: float = 0.05
+    max_frequency: float = 0.9
+    log_radius: bool = False
+    smoothing_bins: float = 1.0
+    refine: bool = True
+    refine_n_angles: int = 720
+    refine_min_range_m: float = 5.0
+    refine_max_range_m: float = 80.0
+    refine_range_step_m: float = 0.5
+    refine_smoothing_bins: float = 2.0
+
+
+@dataclass(frozen=True)
+class TranslationConfig:
+    """Phase correlation of de-rotated Cartesian images.
+
+    Attributes:
+        smoothing_px: Gaussian width [pixels] of the correlation peak (low-pass on the normalised
+            cross-power spectrum) so that a 3 x 3 Gaussian fit locates it to a fraction of a pixel.
+        whitening: exponent of the spectral normalisation (1 is pure phase correlation, 0 plain
+            cross-correlation).
+        fine_search_px: the fine peak is searched within this many fine pixels of the coarse
+            estimate.
+        use_fine: run the fine (near range, full resolution) level after the coarse one.
+    """
+
+    smoothing_px: float = 1.0
+    whitening: float = 1.0
+    fine_search_px: int = 6
+    use_fine: bool = True
+
+
+@dataclass(frozen=True)
+class QualityConfig:
+    """When an estimate counts as failed, and how its covariance is scaled.
+
+    Attributes:
+        min_peak_quality: minimum peak-to-noise ratio of the translation and rotation peaks.
+        max_coarse_fine_disagreement_m: coarse and fine translations may differ by this much [m].
+        max_speed_mps: a motion faster than this is implausible [m/s].
+        max_yaw_rate_dps: a rotation faster than this is implausible [deg/s].
+        max_prediction_error_m: in `Odometry`, an estimate farther than this from the
+            constant-velocity prediction is rejected [m].
+        max_prediction_error_deg: the same for the rotation [deg].
+        min_sigma_xy_m: floor of the translation standard deviation [m].
+        min_sigma_yaw_deg: floor of the rotation standard deviation [deg].
+        sigma_scale: multiplies the peak-derived standard deviations (calibration factor).
+        gap_sigma_xy_m: standard deviation given to a constant-velocity prediction that covers a
+            failed registration [m].
+        gap_sigma_yaw_deg: the same for its rotation [deg].
+    """
+
+    min_peak_quality: float = 6.0
+    max_coarse_fine_disagreement_m: float = 1.0
+    max_speed_mps: float = 45.0
+    max_yaw_rate_dps: float = 120.0
+    max_prediction_error_m: float = 1.5
+    max_prediction_error_deg: float = 5.0
+    min_sigma_xy_m: float = 0.02
+    min_sigma_yaw_deg: float = 0.05
+    sigma_scale: float = 3.0
+    gap_sigma_xy_m: float = 1.0
+    gap_sigma_yaw_deg: float = 5.0
+
+
+@dataclass(frozen=True)
+class KeyframeConfig:
+    """When the current keyframe is replaced by the frame just registered.
+
+    Attributes:
+        max_translation_m: distance from the keyframe [m].
+        max_rotation_deg: rotation from the keyframe [deg].
+        min_peak_quality: peak quality below which the keyframe is renewed (overlap fading).
+        max_frames: at most this many frames are registered against one keyframe.
+    """
+
+    max_translation_m: float = 5.0
+    max_rotation_deg: float = 10.0
+    min_peak_quality: float = 12.0
+    max_frames: int = 8
+
+
+@dataclass(frozen=True)
+class DeskewConfig:
+    """Motion-distortion correction (constant velocity over a sweep).
+
+    Attributes:
+        enabled: correct each scan with the current velocity estimate when it has per-azimuth
+            times.
+        iterations: `estimate_motion` re-registers this many extra times with the velocity of its
+            own previous estimate (the `Odometry` class uses the running velocity instead).
+    """
+
+    enabled: bool = True
+    iterations: int = 1
+
+
+def _coarse() -> LevelConfig:
+    return LevelConfig(cell_m=0.8, size_px=256)
+
+
+def _fine() -> LevelConfig:
+    return LevelConfig(cell_m=0.25, size_px=384)
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    """The odometry stage's settings (the `odometry` section of a radar-slam config)."""
+
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    coarse: LevelConfig = field(default_factory=_coarse)
+    fine: LevelConfig = field(default_factory=_fine)
+    rotation: RotationConfig = field(default_factory=RotationConfig)
+    translation: TranslationConfig = field(default_factory=TranslationConfig)
+    quality: QualityConfig = field(default_factory=QualityConfig)
+    keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
+    deskew: DeskewConfig = field(default_factory=DeskewConfig)

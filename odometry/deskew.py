@@ -1,0 +1,132 @@
+"""Motion-distortion correction for a spinning radar under constant velocity.
+
+A Navtech sweep takes about 250 ms; at 8 m/s the sensor moves 2 m while it turns, so each
+azimuth sees the world from a different pose. With the sensor's body velocity (twist) constant
+over the sweep, the pose at time tau after the scan's reference time is, to first order,
+S(tau) = (vx tau, vy tau, w tau) in the reference pose's frame. A point q (reference frame) was
+measured by the azimuth swept at time tau(q) at the sensor coordinates p = S(tau)^-1 q.
+
+`sampling_maps` folds this into the backward warp: for every Cartesian pixel q it returns the
+polar (bin, row) where the scan recorded q, so that remapping yields the de-skewed image directly
+(no point lists, one remap). Range is exact for the displacement, bearing to second order, the
+rotation during the sweep to first order; errors stay below a centimetre beyond 10 m at 10 m/s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from odometry.se2 import wrap_angle
+
+FloatImage = NDArray[np.float32]
+SMALL_ANGLE_RAD = 1e-6
+MIN_RANGE_SQUARED_M2 = 1e-4
+"""Guards the bearing correction's denominator at the sensor itself (that pixel is zeroed)."""
+
+
+def sampling_maps(
+    x_m: FloatImage,
+    y_m: FloatImage,
+    range_m: FloatImage,
+    bearing_rad: FloatImage,
+    *,
+    first_azimuth_rad: float,
+    azimuth_step_rad: float,
+    n_azimuths: int,
+    bin_size_m: float,
+    rotation_rad: float = 0.0,
+    twist: NDArray[np.float64] | None = None,
+    timing: tuple[float, float] | None = None,
+) -> tuple[FloatImage, FloatImage]:
+    """Polar sampling maps of a rotated, de-skewed backward warp.
+
+    Args:
+        x_m, y_m: (H, W) coordinates of each output pixel [m] (x forward, y left).
+        range_m: (H, W) range of each output pixel from the sensor [m].
+        bearing_rad: (H, W) bearing of each output pixel [rad], CCW from +x.
+        first_azimuth_rad: azimuth of polar row 0 [rad].
+        azimuth_step_rad: signed azimuth step between rows [rad]; rows cover one full turn.
+        n_azimuths: number of polar rows.
+        bin_size_m: polar bin size [m]; bin k is centred at (k + 0.5) * bin_size_m.
+        rotation_rad: the scan is rendered rotated by this angle: output bearing b shows the
+            scan's bearing b - rotation_rad.
+        twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) in the scan's own frame, or
+            None for no de-skew.
+        timing: (time of row 0, row period) [s] relative to the scan's reference time, or None
+            (no de-skew).
+
+    Returns:
+        (bins, rows) float32 maps of shape (H, W) for `raplace.warp.remap`; rows in [0, n).
+    """
+    scale = np.float32(1.0 / azimuth_step_rad)
+    offset = np.float32(wrap_angle(first_azimuth_rad + rotation_rad))
+    rows_scan = _wrap_rows((bearing_rad - offset) * scale, n_azimuths)
+    if twist is None or timing is None or not np.any(np.asarray(twist) != 0.0):
+        return range_m * np.float32(1.0 / bin_size_m) - np.float32(0.5), rows_scan
+
+    vx, vy, yaw_rate = (float(v) for v in np.asarray(twist, dtype=np.float64))
+    c, s = np.cos(rotation_rad), np.sin(rotation_rad)
+    wx, wy = c * vx - s * vy, s * vx + c * vy  # velocity in the rendered (rotated) frame
+    tau = rows_scan * np.float32(timing[1])
+    tau += np.float32(timing[0])  # [s] per pixel
+    along = x_m * np.float32(wx)
+    along += y_m * np.float32(wy)  # r * (u . w)
+    across = x_m * np.float32(wy)
+    across -= y_m * np.float32(wx)  # r * (u x w)
+    r2 = range_m * range_m
+    # |q - tau w|^2 = r^2 - tau (2 (r u . w) - tau |w|^2)
+    moved = tau * np.float32(wx * wx + wy * wy)
+    moved -= np.float32(2.0) * along
+    moved *= tau
+    moved += r2
+    np.maximum(moved, 0.0, out=moved)
+    bins = np.sqrt(moved, out=moved)
+    bins *= np.float32(1.0 / bin_size_m)
+    bins -= np.float32(0.5)
+    # bearing of q - tau w ~ bearing - (u x tau w) / (r - u . tau w), then the turn during tau.
+    along *= tau
+    np.subtract(r2, along, out=along)
+    np.maximum(along, np.float32(MIN_RANGE_SQUARED_M2), out=along)
+    across /= along
+    across += np.float32(yaw_rate)
+    across *= tau
+    across *= scale
+    rows = _wrap_rows(np.subtract(rows_scan, across, out=across), n_azimuths)
+    return bins, rows
+
+
+def _wrap_rows(rows: FloatImage, n_azimuths: int) -> FloatImage:
+    """Rows modulo n_azimuths into [0, n) (floor-based: np.mod is slow on float32)."""
+    n = np.float32(n_azimuths)
+    wraps = np.floor(rows * np.float32(1.0 / n_azimuths))
+    wraps *= n
+    rows = rows - wraps
+    # Rounding can leave -0.0 or exactly n; both are valid rows of the seam-wrapped image.
+    return rows
+
+
+def twist_from_motion(motion: ArrayLike, dt_s: float) -> NDArray[np.float64]:
+    """The constant body twist (vx, vy [m/s], yaw rate [rad/s]) that moves by `motion` in `dt_s`.
+
+    `motion` is (dx, dy, dyaw), the end pose in the start pose's frame; the SE(2) logarithm is
+    used, so an arc is followed exactly.
+    """
+    dx, dy, dyaw = (float(v) for v in np.asarray(motion, dtype=np.float64))
+    if dt_s <= 0:
+        raise ValueError(f"dt_s must be positive, got {dt_s}")
+    if abs(dyaw) < SMALL_ANGLE_RAD:
+        return np.array([dx, dy, dyaw]) / dt_s
+    half = 0.5 * dyaw
+    a = half / np.tan(half)  # V^-1 = [[a, half], [-half, a]]
+    return np.array([a * dx + half * dy, -half * dx + a * dy, dyaw]) / dt_s
+
+
+def motion_from_twist(twist: ArrayLike, dt_s: float) -> NDArray[np.float64]:
+    """The motion (dx, dy, dyaw) after `dt_s` seconds at a constant body twist (SE(2) exp)."""
+    vx, vy, yaw_rate = (float(v) * dt_s for v in np.asarray(twist, dtype=np.float64))
+    if abs(yaw_rate) < SMALL_ANGLE_RAD:
+        return np.array([vx, vy, yaw_rate])
+    sn, cs = np.sin(yaw_rate), np.cos(yaw_rate)
+    a, b = sn / yaw_rate, (1.0 - cs) / yaw_rate
+    return np.array([a * vx - b * vy, b * vx + a * vy, yaw_rate])

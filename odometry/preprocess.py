@@ -1,0 +1,302 @@
+"""Scan conditioning: polar filtering, then windowed Cartesian images for phase correlation.
+
+Two steps, both pure:
+
+1. `preprocess_polar(scan, cfg) -> PolarScan`: azimuth rows resampled onto a uniform sweep when
+   needed, range bins averaged down to about `bin_size_m` (speckle), each range bin's median over
+   azimuths subtracted (ring noise: constant-range bands that do not move with the vehicle and
+   would pull phase correlation toward zero motion), an optional per-azimuth CFAR-like noise
+   floor, the saturated near range zeroed.
+2. `render_cartesian(polar, level, rotation_rad, twist)`: the backward-warped Cartesian image of a
+   `CartesianLevel` (image convention of `raplace.warp`: +x forward up, +y left to the left,
+   sensor at the centre), optionally rotated and de-skewed (`odometry.deskew`), multiplied by the
+   level's radial apodisation window.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry import OdometryError
+from odometry.config import LevelConfig, PreprocessConfig
+from odometry.deskew import sampling_maps
+from odometry.scan import Scan
+from raplace.warp import CartesianGrid, remap
+
+TWO_PI = 2.0 * np.pi
+NS_PER_S = 1e9
+UNIFORM_SWEEP_TOLERANCE = 0.05
+"""Rows are resampled when an azimuth deviates from the fitted uniform sweep by more than this
+fraction of the azimuth step."""
+MIN_AZIMUTHS = 8
+
+FloatImage = NDArray[np.float32]
+
+
+@dataclass(frozen=True)
+class RowTiming:
+    """Linear acquisition-time model of a `PolarScan`'s rows, relative to its reference time.
+
+    Row i was measured at `first_row_s + i * row_period_s` seconds after the scan's timestamp
+    (negative before it).
+    """
+
+    first_row_s: float
+    row_period_s: float
+
+
+@dataclass(frozen=True)
+class PolarScan:
+    """A conditioned polar scan on a uniform azimuth sweep.
+
+    Attributes:
+        image: (n_azimuths, n_bins) float32 non-negative intensities; row i lies at azimuth
+            `first_azimuth_rad + i * azimuth_step_rad` (CCW from +x, x-forward y-left), bin k at
+            range (k + 0.5) * bin_size_m; the rows cover one full turn.
+        first_azimuth_rad: azimuth of row 0 [rad].
+        azimuth_step_rad: signed step between rows [rad]; n_azimuths * |step| = 2 pi.
+        bin_size_m: range bin size [m].
+        timestamp_ns: the scan's reference time [ns].
+        timing: per-row acquisition times, or None when the scan has no azimuth times.
+    """
+
+    image: FloatImage
+    first_azimuth_rad: float
+    azimuth_step_rad: float
+    bin_size_m: float
+    timestamp_ns: int
+    timing: RowTiming | None
+
+    @property
+    def n_azimuths(self) -> int:
+        return int(self.image.shape[0])
+
+    @property
+    def max_range_m(self) -> float:
+        return float(self.image.shape[1] * self.bin_size_m)
+
+
+@dataclass(frozen=True)
+class CartesianLevel:
+    """Cached per-pixel polar geometry and window of one Cartesian image level.
+
+    Pixel (r, c) of the `grid` (see `raplace.warp`) has range `range_m[r, c]` and bearing
+    `bearing_rad[r, c]` (CCW from +x) from the sensor at the image centre. All arrays are
+    (size_px, size_px) float32.
+    """
+
+    grid: CartesianGrid
+    x_m: FloatImage
+    y_m: FloatImage
+    range_m: FloatImage
+    bearing_rad: FloatImage
+    window: FloatImage
+
+    @property
+    def size_px(self) -> int:
+        return self.grid.size_px
+
+    @property
+    def cell_m(self) -> float:
+        return self.grid.cell_m
+
+
+@functools.lru_cache(maxsize=8)
+def cartesian_level(cfg: LevelConfig) -> CartesianLevel:
+    """The geometry and apodisation window of a level (cached per config).
+
+    The window is a radial Tukey window: 1 up to (1 - taper_fraction) of the inscribed radius,
+    then a cosine fall to 0 at the inscribed radius, 0 in the corners.
+    """
+    if cfg.size_px < 8 or cfg.size_px % 2 or cfg.cell_m <= 0:
+        raise OdometryError(f"level needs an even size_px >= 8 and cell_m > 0, got {cfg}")
+    if not 0.0 < cfg.taper_fraction <= 1.0:
+        raise OdometryError(f"taper_fraction must be in (0, 1], got {cfg.taper_fraction}")
+    grid = CartesianGrid(cell_m=cfg.cell_m, size_px=cfg.size_px)
+    x, y = grid.pixel_centres()
+    rng = np.hypot(x, y)
+    outer = grid.half_extent_m
+    inner = (1.0 - cfg.taper_fraction) * outer
+    fall = np.clip((rng - inner) / (outer - inner), 0.0, 1.0)
+    window = 0.5 * (1.0 + np.cos(np.pi * fall))
+    return CartesianLevel(
+        grid=grid,
+        x_m=x.astype(np.float32),
+        y_m=y.astype(np.float32),
+        range_m=rng.astype(np.float32),
+        bearing_rad=np.arctan2(y, x).astype(np.float32),
+        window=window.astype(np.float32),
+    )
+
+
+def _uniform_sweep(azimuths_rad: NDArray[np.float64]) -> tuple[float, float, NDArray[np.float64]]:
+    """Fit a uniform full-turn sweep to the azimuths.
+
+    Returns (first azimuth [rad], signed step [rad], fractional source row of each uniform row);
+    the source rows are simply 0..n-1 when the scan already is uniform.
+    """
+    az = np.unwrap(np.asarray(azimuths_rad, dtype=np.float64))
+    n = len(az)
+    direction = 1.0 if az[-1] > az[0] else -1.0
+    step = direction * TWO_PI / n
+    index = np.arange(n, dtype=np.float64)
+    first = float(np.mean(az - index * step))  # least-squares offset for the full-turn step
+    residual = np.abs(az - (first + index * step))
+    if residual.max() <= UNIFORM_SWEEP_TOLERANCE * abs(step):
+        return first, step, index
+    # Non-uniform (or not a full turn): sample the rows at uniform angles, periodically.
+    first = float(az[0])
+    offsets = direction * (az - az[0])
+    if offsets.max() >= TWO_PI or np.any(np.diff(offsets) <= 0):
+        raise OdometryError("azimuths must sweep monotonically through less than one full turn")
+    target = index * abs(step)
+    ext_offsets = np.append(offsets, TWO_PI)
+    ext_rows = np.append(index, float(n))  # row n is row 0 again (wrapped below)
+    return first, step, np.interp(target, ext_offsets, ext_rows)
+
+
+def _row_timing(scan: Scan, source_rows: NDArray[np.float64]) -> RowTiming | None:
+    """Least-squares linear time model of the (uniform) rows, or None without azimuth times."""
+    times = scan.azimuth_times_ns
+    if times is None:
+        return None
+    t = (np.asarray(times, dtype=np.int64) - int(scan.timestamp_ns)).astype(np.float64) / NS_PER_S
+    if t.shape != (len(source_rows),):
+        raise OdometryError(
+            f"azimuth_times_ns must have one entry per azimuth ({len(source_rows)}), got {t.shape}"
+        )
+    index = np.arange(len(t), dtype=np.float64)
+    period, first = np.polyfit(index, t, 1)
+    # Times of the uniform rows follow from where they were sampled in the source rows.
+    first_uniform = first + period * source_rows[0]
+    return RowTiming(first_row_s=float(first_uniform), row_period_s=float(period))
+
+
+def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
+    """Condition a raw polar scan for Cartesian rendering.
+
+    Args:
+        scan: the raw scan (`polar` (n_azimuths, n_bins) uint8, CCW azimuths [rad]).
+        cfg: preprocessing settings.
+
+    Returns:
+        The conditioned scan on uniform azimuths with bins of about `cfg.bin_size_m`.
+
+    Raises:
+        OdometryError: inconsistent shapes or geometry.
+    """
+    polar = np.asarray(scan.polar)
+    az = np.asarray(scan.azimuths_rad, dtype=np.float64)
+    if polar.ndim != 2 or polar.shape[0] != az.shape[0] or az.ndim != 1:
+        raise OdometryError(
+            f"polar must be (n_azimuths, n_bins) with one azimuth per row; got polar "
+            f"{polar.shape}, azimuths {az.shape}"
+        )
+    if polar.shape[0] < MIN_AZIMUTHS or scan.range_resolution_m <= 0:
+        raise OdometryError(
+            f"need >= {MIN_AZIMUTHS} azimuths and a positive range resolution, got "
+            f"{polar.shape[0]} and {scan.range_resolution_m}"
+        )
+    first, step, source_rows = _uniform_sweep(az)
+    timing = _row_timing(scan, source_rows)
+
+    res = float(scan.range_resolution_m)
+    factor = max(1, int(round(cfg.bin_size_m / res)))
+    n_bins = min(polar.shape[1], int(np.ceil(cfg.max_range_m / res))) // factor * factor
+    if n_bins < factor:
+        raise OdometryError(f"scan has {polar.shape[1]} bins: too few for max_range_m")
+    image: FloatImage = polar[:, :n_bins].astype(np.float32)
+    if factor > 1:  # block mean over `factor` bins
+        size = (n_bins // factor, image.shape[0])
+        image = np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), np.float32)
+    if not np.array_equal(source_rows, np.arange(len(source_rows))):
+        rows = np.broadcast_to(source_rows.astype(np.float32)[:, None], image.shape)
+        cols = np.broadcast_to(np.arange(image.shape[1], dtype=np.float32), image.shape)
+        image = remap(image, np.ascontiguousarray(cols), np.ascontiguousarray(rows))
+    bin_size = factor * res
+    near = min(image.shape[1], int(np.ceil(cfg.min_range_m / bin_size)))
+
+    if cfg.ring_noise_removal:
+        mid = image.shape[0] // 2
+        ring = np.partition(image, mid, axis=0)[mid]
+        image = image - ring[None, :]
+    if cfg.noise_floor_sigmas >= 0:
+        body = image[:, near:]
+        floor = body.mean(axis=1) + cfg.noise_floor_sigmas * body.std(axis=1)
+        image = image - floor[:, None]
+    np.maximum(image, 0.0, out=image)
+    image[:, :near] = 0.0
+    if cfg.gamma != 1.0:
+        np.power(image, cfg.gamma, out=image)
+    return PolarScan(
+        image=np.ascontiguousarray(image, dtype=np.float32),
+        first_azimuth_rad=first,
+        azimuth_step_rad=step,
+        bin_size_m=bin_size,
+        timestamp_ns=int(scan.timestamp_ns),
+        timing=timing,
+    )
+
+
+def sample_scan(
+    polar: PolarScan,
+    x_m: FloatImage,
+    y_m: FloatImage,
+    range_m: FloatImage,
+    bearing_rad: FloatImage,
+    rotation_rad: float = 0.0,
+    twist: NDArray[np.float64] | None = None,
+) -> FloatImage:
+    """Sample a conditioned scan at arbitrary points (bilinear, 0 beyond its range).
+
+    Args:
+        polar: the conditioned scan.
+        x_m, y_m, range_m, bearing_rad: (H, W) the points [m, rad] in a frame centred on the
+            sensor at the scan's reference time, turned by `rotation_rad` from the scan's frame.
+        rotation_rad: the scan appears rotated by this angle [rad] (CCW): a return at bearing b in
+            the scan's frame is sampled at bearing b + rotation_rad.
+        twist: (3,) body velocity (vx [m/s], vy [m/s], yaw rate [rad/s]) of the sensor during the
+            sweep, for de-skewing to the scan's reference time; None (or a scan without times)
+            samples the scan as measured.
+
+    Returns:
+        (H, W) float32 intensities.
+    """
+    timing = polar.timing
+    bins, rows = sampling_maps(
+        x_m,
+        y_m,
+        range_m,
+        bearing_rad,
+        first_azimuth_rad=polar.first_azimuth_rad,
+        azimuth_step_rad=polar.azimuth_step_rad,
+        n_azimuths=polar.n_azimuths,
+        bin_size_m=polar.bin_size_m,
+        rotation_rad=rotation_rad,
+        twist=twist,
+        timing=None if timing is None else (timing.first_row_s, timing.row_period_s),
+    )
+    return remap(polar.image, bins, rows)
+
+
+def render_cartesian(
+    polar: PolarScan,
+    level: CartesianLevel,
+    rotation_rad: float = 0.0,
+    twist: NDArray[np.float64] | None = None,
+) -> FloatImage:
+    """The windowed Cartesian image (size_px, size_px) float32 of a conditioned scan.
+
+    `rotation_rad` and `twist` as in `sample_scan`; the image is multiplied by the level's
+    apodisation window.
+    """
+    image = sample_scan(
+        polar, level.x_m, level.y_m, level.range_m, level.bearing_rad, rotation_rad, twist
+    )
+    image *= level.window
+    return image

@@ -1,0 +1,298 @@
+"""Scan-to-scan registration by phase correlation (PhaRaO-style), as pure functions.
+
+`estimate_motion(prev, cur, cfg)` returns the pose of `cur` in the frame of `prev`
+(dx, dy [m], dyaw [rad]; x forward, y left, yaw CCW) with a covariance and a quality flag:
+
+1. Both scans are conditioned (`preprocess_polar`) and rendered as windowed Cartesian images;
+   the coarse level (wide, low resolution) is made at once, the fine level (near range, full
+   resolution) when the scan serves as a reference.
+2. Rotation: Fourier-Mellin on the coarse spectra (`odometry.rotation`), known modulo pi.
+3. Translation: `cur` is re-rendered rotated into `prev`'s orientation (rotation folded into the
+   polar sampling maps, so no second interpolation); both half-turn hypotheses are phase
+   correlated on the coarse level (the second is the first image turned by pi, computed in the
+   Fourier domain) and the stronger peak wins; the fine level then refines the translation near
+   the coarse peak to a fraction of a fine pixel.
+4. Quality: peak-to-noise ratios, coarse/fine agreement and plausible speeds decide `ok`; the
+   covariance comes from the peaks' widths and heights.
+
+`prepare` and `register` split the work so that a caller (the `Odometry` class) conditions each
+scan once and keeps a reference's spectra while registering many scans against it.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry.config import OdometryConfig
+from odometry.deskew import twist_from_motion
+from odometry.phase_correlation import (
+    HalfSpectrum,
+    Peak,
+    correlate,
+    forward,
+    locate_peak,
+)
+from odometry.preprocess import (
+    PolarScan,
+    cartesian_level,
+    preprocess_polar,
+    render_cartesian,
+    sample_scan,
+)
+from odometry.rotation import (
+    RotationEstimate,
+    Signature,
+    estimate_rotation,
+    polar_grid,
+    refine_rotation,
+    signature,
+)
+from odometry.scan import Scan
+from odometry.se2 import wrap_angle
+
+logger = logging.getLogger(__name__)
+
+NS_PER_S = 1e9
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MotionEstimate:
+    """Relative motion between two scans.
+
+    Attributes:
+        motion: (3,) pose of the current scan in the reference scan's frame: dx, dy [m], dyaw
+            [rad] (x forward, y left, yaw CCW), between the scans' reference times.
+        covariance: (3, 3) covariance of `motion` [m^2, m rad, rad^2], order (x, y, yaw).
+        quality: peak-to-noise ratio of the final translation peak (higher is better).
+        rotation_quality: peak-to-noise ratio of the rotation peak.
+        ok: True when every check passed; a caller must not use `motion` when False.
+        reason: why the estimate failed ("" when ok).
+        coarse_motion: (3,) the coarse level's estimate (for diagnostics).
+    """
+
+    motion: FloatArray
+    covariance: FloatArray
+    quality: float
+    rotation_quality: float
+    ok: bool
+    reason: str = ""
+    coarse_motion: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def dx(self) -> float:
+        return float(self.motion[0])
+
+    @property
+    def dy(self) -> float:
+        return float(self.motion[1])
+
+    @property
+    def dyaw(self) -> float:
+        return float(self.motion[2])
+
+
+class PreparedScan:
+    """A conditioned scan with the spectra registration needs, computed once.
+
+    Attributes:
+        polar: the conditioned polar scan.
+        twist: (3,) body velocity used for de-skewing (None: as measured).
+        empty: nothing is left after conditioning (the scan cannot be registered).
+        coarse_spectrum: half spectrum of the unrotated coarse image.
+        rotation_signature: Fourier-Mellin signature of the coarse image.
+    """
+
+    def __init__(self, polar: PolarScan, twist: FloatArray | None, cfg: OdometryConfig) -> None:
+        self.polar = polar
+        self.empty = not bool(np.any(polar.image > 0))
+        self.twist = None if twist is None or polar.timing is None else np.asarray(twist, float)
+        self.cfg = cfg
+        coarse = render_cartesian(polar, cartesian_level(cfg.coarse), 0.0, self.twist)
+        self.coarse_spectrum: HalfSpectrum = forward(coarse)
+        self.rotation_signature: Signature = signature(self.coarse_spectrum, cfg.rotation)
+
+    @property
+    def timestamp_ns(self) -> int:
+        return self.polar.timestamp_ns
+
+    @functools.cached_property
+    def fine_spectrum(self) -> HalfSpectrum:
+        """Half spectrum of the unrotated fine image (made when the scan is a reference)."""
+        image = render_cartesian(self.polar, cartesian_level(self.cfg.fine), 0.0, self.twist)
+        return forward(image)
+
+    @functools.cached_property
+    def refine_image(self) -> NDArray[np.float32]:
+        """The scan on the rotation-refinement polar grid (made when the scan is a reference)."""
+        grid = polar_grid(self.cfg.rotation)
+        return sample_scan(
+            self.polar, grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad, 0.0, self.twist
+        )
+
+
+def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) -> PreparedScan:
+    """Condition a scan and compute its coarse spectrum and rotation signature.
+
+    Args:
+        scan: the raw scan.
+        cfg: odometry settings.
+        twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) to de-skew with; ignored when
+            de-skewing is disabled or the scan has no azimuth times.
+    """
+    polar = preprocess_polar(scan, cfg.preprocess)
+    return PreparedScan(polar, twist if cfg.deskew.enabled else None, cfg)
+
+
+@functools.lru_cache(maxsize=4)
+def _half_turn_ramp(size_px: int) -> NDArray[np.complex64]:
+    """exp(2 pi i (k_r + k_c) / n) on the half spectrum: the spectrum of a pi-turned image is
+    this times the conjugate spectrum (the grid is centred between pixels)."""
+    k_r = np.fft.fftfreq(size_px)[:, None]
+    k_c = np.fft.rfftfreq(size_px)[None, :]
+    ramp = np.exp(2j * np.pi * (k_r + k_c)).astype(np.complex64)
+    ramp.setflags(write=False)
+    return ramp
+
+
+def _peak_to_metres(peak: Peak, cell_m: float) -> FloatArray:
+    """Translation (x, y) [m] of the moved scan's sensor from a peak of correlate(ref, moved).
+
+    The moved image's content is the reference's displaced by -t; +1 row is -cell in x and
+    +1 column is -cell in y, so t = (rows, cols) * cell.
+    """
+    return peak.shift_px * cell_m
+
+
+def _residual_rotation(
+    ref: PreparedScan, cur: PreparedScan, translation: FloatArray, yaw: float, cfg: OdometryConfig
+) -> RotationEstimate:
+    """Rotation left after rendering `cur` through (translation, yaw) onto the polar grid about
+    `ref`'s sensor."""
+    grid = polar_grid(cfg.rotation)
+    x, y, rng, bearing = grid.shifted(float(translation[0]), float(translation[1]))
+    moved = sample_scan(cur.polar, x, y, rng, bearing, yaw, cur.twist)
+    return refine_rotation(ref.refine_image, moved, cfg.rotation)
+
+
+def register(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> MotionEstimate:
+    """Pose of `cur` in the frame of `ref` from their prepared images (see module docstring)."""
+    coarse_level = cartesian_level(cfg.coarse)
+    tcfg = cfg.translation
+    rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, cfg.rotation)
+
+    # Coarse translation for both half-turn hypotheses.
+    image = render_cartesian(cur.polar, coarse_level, rotation.angle_rad, cur.twist)
+    spectrum = forward(image)
+    shape = image.shape
+    hypotheses = []
+    for turn in (0.0, np.pi):
+        candidate = spectrum if turn == 0.0 else _half_turn_ramp(shape[0]) * np.conj(spectrum)
+        surface = correlate(
+            ref.coarse_spectrum, candidate, shape, tcfg.smoothing_px, tcfg.whitening
+        )
+        hypotheses.append((locate_peak(surface, tcfg.smoothing_px), turn))
+    coarse_peak, turn = max(hypotheses, key=lambda h: h[0].quality)
+    yaw = float(wrap_angle(rotation.angle_rad + turn))
+    t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
+    coarse_motion = np.array([t_coarse[0], t_coarse[1], yaw])
+    if cfg.rotation.refine:
+        residual = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
+        yaw = float(wrap_angle(yaw + residual.angle_rad))
+        rotation = residual
+
+    peak, cell = coarse_peak, coarse_level.cell_m
+    if tcfg.use_fine:
+        fine_level = cartesian_level(cfg.fine)
+        fine = render_cartesian(cur.polar, fine_level, yaw, cur.twist)
+        centre = t_coarse / fine_level.cell_m
+        surface = correlate(
+            ref.fine_spectrum, forward(fine), fine.shape, tcfg.smoothing_px, tcfg.whitening
+        )
+        peak = locate_peak(
+            surface, tcfg.smoothing_px, (float(centre[0]), float(centre[1])), tcfg.fine_search_px
+        )
+        cell = fine_level.cell_m
+    translation = _peak_to_metres(peak, cell)
+    motion = np.array([translation[0], translation[1], yaw])
+
+    qcfg = cfg.quality
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = peak.covariance_px() * cell**2 * qcfg.sigma_scale**2
+    cov[:2, :2] += np.eye(2) * qcfg.min_sigma_xy_m**2
+    cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(
+        qcfg.min_sigma_yaw_deg
+    ) ** 2
+
+    reason = ""
+    dt_s = (cur.timestamp_ns - ref.timestamp_ns) / NS_PER_S
+    if ref.empty or cur.empty:
+        reason = "a scan is empty after conditioning"
+    elif rotation.quality < qcfg.min_peak_quality:
+        reason = f"weak rotation peak (quality {rotation.quality:.1f})"
+    elif min(peak.quality, coarse_peak.quality) < qcfg.min_peak_quality:
+        reason = f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
+    elif np.hypot(*(translation - t_coarse)) > qcfg.max_coarse_fine_disagreement_m:
+        reason = f"coarse and fine translations disagree ({t_coarse} vs {translation})"
+    elif dt_s > 0 and np.hypot(*translation) / dt_s > qcfg.max_speed_mps:
+        reason = f"implausible speed {np.hypot(*translation) / dt_s:.1f} m/s"
+    elif dt_s > 0 and np.rad2deg(abs(yaw)) / dt_s > qcfg.max_yaw_rate_dps:
+        reason = f"implausible yaw rate {np.rad2deg(abs(yaw)) / dt_s:.1f} deg/s"
+    if reason:
+        logger.debug("registration failed: %s (motion %s)", reason, motion)
+    return MotionEstimate(
+        motion=motion,
+        covariance=cov,
+        quality=float(peak.quality),
+        rotation_quality=rotation.quality,
+        ok=not reason,
+        reason=reason,
+        coarse_motion=coarse_motion,
+    )
+
+
+def estimate_motion(
+    prev: Scan,
+    cur: Scan,
+    cfg: OdometryConfig | None = None,
+    twist: FloatArray | None = None,
+) -> MotionEstimate:
+    """Pose of scan `cur` in the frame of scan `prev` (pure; see the module docstring).
+
+    Args:
+        prev, cur: the two scans (any objects with the `Scan` attributes).
+        cfg: odometry settings (defaults when None).
+        twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) to de-skew both scans with
+            first; None starts from no de-skew. When both scans carry azimuth times and
+            de-skewing is enabled, the scans are then re-registered `cfg.deskew.iterations` times,
+            de-skewed with the velocity of the previous estimate.
+
+    Returns:
+        The motion estimate; check `ok` before using it.
+    """
+    cfg = OdometryConfig() if cfg is None else cfg
+    ref_polar = preprocess_polar(prev, cfg.preprocess)
+    cur_polar = preprocess_polar(cur, cfg.preprocess)
+    use_twist = twist if cfg.deskew.enabled else None
+    estimate = register(
+        PreparedScan(ref_polar, use_twist, cfg), PreparedScan(cur_polar, use_twist, cfg), cfg
+    )
+    dt_s = (int(cur.timestamp_ns) - int(prev.timestamp_ns)) / NS_PER_S
+    deskewable = (
+        cfg.deskew.enabled and ref_polar.timing is not None and cur_polar.timing is not None
+    )
+    if not deskewable or dt_s <= 0:
+        return estimate
+    for _ in range(cfg.deskew.iterations):
+        if not estimate.ok:
+            break
+        velocity = twist_from_motion(estimate.motion, dt_s)
+        estimate = register(
+            PreparedScan(ref_polar, velocity, cfg), PreparedScan(cur_polar, velocity, cfg), cfg
+        )
+    return estimate

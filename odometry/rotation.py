@@ -1,0 +1,176 @@
+"""Rotation between two scans by Fourier-Mellin: the angle of their magnitude spectra.
+
+The magnitude of an image's spectrum ignores translation and turns with the image. Resampled on a
+polar grid (angle x radius), a rotation becomes a shift along the angle axis, found by phase
+correlation along that axis (summed over radii). A real image's magnitude spectrum is symmetric
+under a half turn, so the angle axis spans [0, pi) and the rotation is known modulo pi: the caller
+tests both hypotheses (`odometry.registration` keeps the one with the stronger translation peak).
+
+Fourier-Mellin alone locks toward zero for small rotations (the pixel grid and the window are
+fixed in both images), so `refine_rotation` follows once the translation is known: both scans are
+sampled on one polar grid centred on the reference sensor (`PolarGrid`), the moved one through the
+current motion estimate; the remaining rotation is then a pure shift along the angle axis.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry.config import RotationConfig
+from odometry.phase_correlation import HalfSpectrum, correlate_1d, locate_peak_1d
+
+Signature = NDArray[np.complex64]
+
+
+@dataclass(frozen=True)
+class RotationEstimate:
+    """Rotation of a scan relative to a reference, modulo pi.
+
+    Attributes:
+        angle_rad: rotation in [-pi/2, pi/2) [rad] (the other hypothesis is angle_rad + pi).
+        sigma_rad: standard deviation from the correlation peak [rad].
+        quality: peak-to-noise ratio of the angular correlation peak.
+    """
+
+    angle_rad: float
+    sigma_rad: float
+    quality: float
+
+
+@dataclass(frozen=True)
+class _PolarSampler:
+    map_cols: NDArray[np.float32]
+    map_rows: NDArray[np.float32]
+
+
+@functools.lru_cache(maxsize=8)
+def _sampler(size_px: int, cfg: RotationConfig) -> _PolarSampler:
+    """cv2.remap maps from (radius, angle) to the row-centred half spectrum of a square image."""
+    nyquist = size_px / 2.0
+    lo, hi = cfg.min_frequency * nyquist, cfg.max_frequency * nyquist
+    if cfg.log_radius:
+        radii = np.geomspace(max(lo, 1.0), hi, cfg.n_radii)
+    else:
+        radii = np.linspace(lo, hi, cfg.n_radii)
+    angles = np.arange(cfg.n_angles) * (np.pi / cfg.n_angles)
+    k_row = radii[:, None] * np.cos(angles)[None, :]
+    k_col = radii[:, None] * np.sin(angles)[None, :]
+    return _PolarSampler(
+        map_cols=k_col.astype(np.float32), map_rows=(k_row + nyquist).astype(np.float32)
+    )
+
+
+def signature(spectrum: HalfSpectrum, cfg: RotationConfig) -> Signature:
+    """Rotation signature of an image from its half spectrum (size_px, size_px // 2 + 1).
+
+    Returns (n_radii, n_angles // 2 + 1) complex64: the angular spectrum of the polar-resampled
+    log magnitude spectrum.
+    """
+    size = spectrum.shape[0]
+    magnitude = np.log1p(np.abs(spectrum))
+    centred = np.fft.fftshift(magnitude, axes=0).astype(np.float32)
+    sampler = _sampler(size, cfg)
+    polar = cv2.remap(
+        centred,
+        sampler.map_cols,
+        sampler.map_rows,
+        interpolation=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
+    polar -= polar.mean(axis=1, keepdims=True)
+    return np.fft.rfft(polar, axis=1).astype(np.complex64)
+
+
+def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationConfig) -> RotationEstimate:
+    """Rotation of the `mov` image relative to `ref` (modulo pi) from their signatures."""
+    curve = correlate_1d(ref, mov, cfg.n_angles, cfg.smoothing_bins)
+    peak = locate_peak_1d(curve, cfg.smoothing_bins)
+    step = np.pi / cfg.n_angles
+    # The spectrum's angle runs from the row- toward the column-frequency axis: the opposite
+    # sense to a CCW turn in the image convention (+x up, +y left).
+    return RotationEstimate(
+        angle_rad=float(-peak.shift * step),
+        sigma_rad=float(np.sqrt(peak.variance()) * step),
+        quality=float(peak.quality),
+    )
+
+
+@dataclass(frozen=True)
+class PolarGrid:
+    """Points on a polar grid about a sensor: row j at bearing j * 2 pi / n_angles (CCW from +x),
+    column k at range min_range_m + (k + 0.5) * range_step_m. Arrays (n_angles, n_ranges) float32
+    [m, rad]."""
+
+    x_m: NDArray[np.float32]
+    y_m: NDArray[np.float32]
+    range_m: NDArray[np.float32]
+    bearing_rad: NDArray[np.float32]
+
+    @property
+    def n_angles(self) -> int:
+        return int(self.x_m.shape[0])
+
+    def shifted(
+        self, dx_m: float, dy_m: float
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+        """(x, y, range, bearing) of the grid's points seen from a sensor at (dx_m, dy_m)."""
+        x = (self.x_m - np.float32(dx_m)).astype(np.float32)
+        y = (self.y_m - np.float32(dy_m)).astype(np.float32)
+        # cv2's polar conversion: ~0.01 deg angle error, ~25x faster than numpy's arctan2.
+        rng, bearing = cv2.cartToPolar(x, y)
+        return x, y, np.asarray(rng, np.float32), np.asarray(bearing, np.float32)
+
+
+@functools.lru_cache(maxsize=4)
+def polar_grid(cfg: RotationConfig) -> PolarGrid:
+    """The refinement grid of a rotation config (cached)."""
+    n_ranges = max(
+        1, int(round((cfg.refine_max_range_m - cfg.refine_min_range_m) / cfg.refine_range_step_m))
+    )
+    ranges = cfg.refine_min_range_m + (np.arange(n_ranges) + 0.5) * cfg.refine_range_step_m
+    bearings = np.arange(cfg.refine_n_angles) * (2.0 * np.pi / cfg.refine_n_angles)
+    bearings = np.where(bearings >= np.pi, bearings - 2.0 * np.pi, bearings)
+    x = ranges[None, :] * np.cos(bearings)[:, None]
+    y = ranges[None, :] * np.sin(bearings)[:, None]
+    rng = np.broadcast_to(ranges[None, :], x.shape)
+    bear = np.broadcast_to(bearings[:, None], x.shape)
+    return PolarGrid(
+        x_m=x.astype(np.float32),
+        y_m=y.astype(np.float32),
+        range_m=np.ascontiguousarray(rng, dtype=np.float32),
+        bearing_rad=np.ascontiguousarray(bear, dtype=np.float32),
+    )
+
+
+def refine_rotation(
+    ref: NDArray[np.float32], mov: NDArray[np.float32], cfg: RotationConfig
+) -> RotationEstimate:
+    """Residual rotation of `mov` relative to `ref`, both sampled on the same `PolarGrid`.
+
+    Args:
+        ref: (n_angles, n_ranges) the reference scan on the grid.
+        mov: (n_angles, n_ranges) the moved scan on the grid, rendered through the current
+            motion estimate (so only a residual rotation remains).
+        cfg: rotation settings.
+
+    Returns:
+        The residual rotation in [-pi, pi) [rad] to add to the estimate's yaw.
+    """
+    n = ref.shape[0]
+    s_ref = np.fft.rfft(ref.T, axis=1).astype(np.complex64)
+    s_mov = np.fft.rfft(mov.T, axis=1).astype(np.complex64)
+    curve = correlate_1d(s_ref, s_mov, n, cfg.refine_smoothing_bins)
+    peak = locate_peak_1d(curve, cfg.refine_smoothing_bins)
+    step = 2.0 * np.pi / n
+    # mov(bearing) = ref(bearing - d): the moved content sits d rows further CCW, i.e. the
+    # rendering turned it too far by d; the yaw needs -d.
+    return RotationEstimate(
+        angle_rad=float(-peak.shift * step),
+        sigma_rad=float(np.sqrt(peak.variance()) * step),
+        quality=float(peak.quality),
+    )

@@ -1,0 +1,167 @@
+"""Benchmark the phase-correlation odometry at MulRan resolution (400 x 3360) on one core.
+
+A sequence is made from one real MulRan scan (../shared/data/mulran/raw_scan/polar/*.png, or a
+random point world when it is absent): the scan is re-sampled as seen from poses along a
+constant-velocity arc, with motion distortion (each azimuth seen from the pose at its own time).
+The script then times `Odometry.register` per frame and reports frames/s, and the odometry's
+error against the known trajectory.
+
+Usage: python scripts/bench_odometry.py [--frames N] [--speed MPS] [--yaw-rate DPS] [--scan PNG]
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry.deskew import motion_from_twist
+from odometry.odometry import Odometry
+from odometry.se2 import between, compose
+from raplace.warp import polar_sample_coords, remap
+
+logger = logging.getLogger("bench_odometry")
+
+MULRAN_N_AZIMUTHS = 400
+MULRAN_N_BINS = 3360
+MULRAN_RANGE_RESOLUTION_M = 0.05952
+MULRAN_FIRST_ENCODER = 9
+MULRAN_ENCODER_STEP = 14
+ENCODER_TICKS = 5600
+SWEEP_S = 0.25
+FRAME_PERIOD_NS = 250_000_000
+DEFAULT_SCAN = (
+    Path(__file__).resolve().parents[2]
+    / "shared/data/mulran/raw_scan/polar/1564718976161407002.png"
+)
+SYNTHETIC_POINTS = 3000
+SYNTHETIC_SEED = 7
+
+
+@dataclass(frozen=True)
+class BenchFrame:
+    """A scan with the attributes of `odometry.scan.Scan`."""
+
+    timestamp_ns: int
+    polar: NDArray[np.uint8]
+    azimuths_rad: NDArray[np.float64]
+    range_resolution_m: float
+    sensor: str
+    azimuth_times_ns: NDArray[np.int64] | None
+
+
+def mulran_azimuths() -> NDArray[np.float64]:
+    """CCW azimuths of MulRan's polar columns (clockwise encoder 9 + 14 j of 5600)."""
+    encoder = MULRAN_FIRST_ENCODER + MULRAN_ENCODER_STEP * np.arange(MULRAN_N_AZIMUTHS)
+    return -encoder * (2.0 * np.pi / ENCODER_TICKS)
+
+
+def world_scan(path: Path) -> NDArray[np.uint8]:
+    """The (400, 3360) polar scan used as the static world (real when available)."""
+    if path.is_file():
+        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if image is not None and image.shape == (MULRAN_N_BINS, MULRAN_N_AZIMUTHS):
+            return np.ascontiguousarray(image.T)
+        logger.warning("%s is not a MulRan polar scan; using a random world", path)
+    else:
+        logger.warning("%s not found; using a random point world", path)
+    rng = np.random.default_rng(SYNTHETIC_SEED)
+    polar = rng.integers(0, 25, (MULRAN_N_AZIMUTHS, MULRAN_N_BINS)).astype(np.uint8)
+    rows = rng.integers(0, MULRAN_N_AZIMUTHS, SYNTHETIC_POINTS)
+    cols = rng.integers(100, MULRAN_N_BINS, SYNTHETIC_POINTS)
+    polar[rows, cols] = rng.integers(80, 255, SYNTHETIC_POINTS)
+    return cv2.GaussianBlur(polar, (5, 3), 0)
+
+
+def render_frame(
+    world: NDArray[np.uint8],
+    azimuths: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    twist: NDArray[np.float64],
+    timestamp_ns: int,
+) -> BenchFrame:
+    """The world scan as measured from `pose` (at mid-sweep) while moving at `twist`."""
+    n_az, n_bins = world.shape
+    tau = (np.arange(n_az) - 0.5 * (n_az - 1)) * (SWEEP_S / n_az)
+    poses = np.array([compose(pose, motion_from_twist(twist, t)) for t in tau])
+    ranges = (np.arange(n_bins) + 0.5) * MULRAN_RANGE_RESOLUTION_M
+    xs = ranges[None, :] * np.cos(azimuths)[:, None]
+    ys = ranges[None, :] * np.sin(azimuths)[:, None]
+    c, s = np.cos(poses[:, 2:3]), np.sin(poses[:, 2:3])
+    x = c * xs - s * ys + poses[:, 0:1]
+    y = s * xs + c * ys + poses[:, 1:2]
+    bins, rows = polar_sample_coords(x, y, azimuths, MULRAN_RANGE_RESOLUTION_M)
+    polar = np.clip(np.rint(remap(world, bins, rows)), 0, 255).astype(np.uint8)
+    return BenchFrame(
+        timestamp_ns=timestamp_ns,
+        polar=polar,
+        azimuths_rad=azimuths,
+        range_resolution_m=MULRAN_RANGE_RESOLUTION_M,
+        sensor="bench-mulran",
+        azimuth_times_ns=(timestamp_ns + np.rint(tau * 1e9)).astype(np.int64),
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=40, help="frames to register")
+    parser.add_argument("--speed", type=float, default=8.0, help="forward speed [m/s]")
+    parser.add_argument("--yaw-rate", type=float, default=6.0, help="yaw rate [deg/s]")
+    parser.add_argument("--scan", type=Path, default=DEFAULT_SCAN, help="MulRan polar PNG")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    cv2.setNumThreads(1)  # one core; numpy's FFT is single-threaded already
+
+    world = world_scan(args.scan)
+    azimuths = mulran_azimuths()
+    twist = np.array([args.speed, 0.0, np.deg2rad(args.yaw_rate)])
+    step = motion_from_twist(twist, FRAME_PERIOD_NS / 1e9)
+    logger.info("rendering %d frames from %s ...", args.frames, args.scan.name)
+    truth = [np.zeros(3)]
+    for _ in range(args.frames - 1):
+        truth.append(compose(truth[-1], step))
+    frames = [
+        render_frame(world, azimuths, pose, twist, k * FRAME_PERIOD_NS)
+        for k, pose in enumerate(truth)
+    ]
+
+    odometry = Odometry()
+    durations = []
+    for frame in frames:
+        start = time.perf_counter()
+        odometry.register(frame)
+        durations.append(time.perf_counter() - start)
+    ms = np.array(durations[1:]) * 1e3  # the first frame only conditions its scan
+    poses = odometry.poses
+    errors = between(np.array(truth), poses)
+    distance = float(np.sum(np.hypot(*np.diff(np.array(truth)[:, :2], axis=0).T)))
+    logger.info(
+        "%d frames (%d x %d), pid %d: %.1f ms/frame mean, %.1f median, %.1f p95 -> %.1f frames/s",
+        len(frames),
+        *world.shape,
+        os.getpid(),
+        ms.mean(),
+        np.median(ms),
+        np.percentile(ms, 95),
+        1e3 / ms.mean(),
+    )
+    logger.info(
+        "keyframes %d, gaps %d; end error %.3f m over %.1f m (%.2f %%), %.3f deg",
+        len(odometry.keyframes),
+        len(odometry.gaps),
+        np.hypot(*errors[-1, :2]),
+        distance,
+        100.0 * np.hypot(*errors[-1, :2]) / max(distance, 1e-9),
+        np.rad2deg(errors[-1, 2]),
+    )
+
+
+if __name__ == "__main__":
+    main()

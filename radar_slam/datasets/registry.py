@@ -25,6 +25,9 @@ class Family:
         obtain: where the dataset can be obtained (for error messages).
         resolve: optional hook turning (root, sequence name) into a folder, creating it if the
             family generates its data (synthetic); None means `<root>/<family>/<sequence>`.
+        detect_priority: families with a higher priority are tried first when detecting a
+            folder's format, so a specialised layout (synthetic, a MulRan layout plus a marker
+            file) wins over the general one it extends.
     """
 
     name: str
@@ -33,6 +36,7 @@ class Family:
     layout: str
     obtain: str
     resolve: Callable[[Path, str], Path] | None = None
+    detect_priority: int = 0
 
 
 _FAMILIES: dict[str, Family] = {}
@@ -71,8 +75,8 @@ def family_folder(root: Path, family: str) -> Path:
 
 
 def detect_family(folder: Path) -> Family | None:
-    """The family whose layout `folder` matches, or None."""
-    for family in _FAMILIES.values():
+    """The family whose layout `folder` matches (highest detect_priority first), or None."""
+    for family in sorted(_FAMILIES.values(), key=lambda f: -f.detect_priority):
         if family.detect(folder):
             return family
     return None

@@ -1,0 +1,72 @@
+"""`radar-slam simulate SCENARIO --out DIR`: write a simulated Navtech sequence (MulRan layout)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from tqdm import tqdm
+
+from radar_slam.errors import ResultsError
+from radar_slam.sim.generate import build_scene, generate_sequence
+from radar_slam.sim.scenarios import GROUPS, SCENARIOS, expand
+
+FIGURE_NAME = "sim_figure.png"
+
+
+def _scenario_help() -> str:
+    names = ", ".join(list(SCENARIOS) + [f"{g} (= {' + '.join(m)})" for g, m in GROUPS.items()])
+    return f"Scenario: {names}."
+
+
+def _check_empty(out: Path) -> None:
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise ResultsError(f"{out}: output folder exists and is not empty; choose another --out")
+
+
+def simulate_command(
+    scenario: str = typer.Argument(..., help=_scenario_help()),
+    out: Path = typer.Option(
+        ...,
+        "--out",
+        help="Sequence folder to create (must be absent or empty); a group writes "
+        "one sub-folder per member.",
+    ),
+    seed: int | None = typer.Option(None, "--seed", help="Seed (default: the scenario's)."),
+    frames: int | None = typer.Option(
+        None, "--frames", min=1, help="Number of scans (default: the whole route)."
+    ),
+    plot: bool = typer.Option(
+        False, "--plot", help=f"Also write {FIGURE_NAME}: town map, trajectory and scans."
+    ),
+) -> None:
+    """Simulate a scenario and write it in the MulRan layout (polar PNGs, global_pose.csv)."""
+    members = expand(scenario)
+    _check_empty(out)
+    grouped = len(members) > 1
+    for member in members:
+        folder = out / member.name if grouped else out
+        with tqdm(desc=member.name, unit="scan", leave=False) as bar:
+
+            def advance(done: int, total: int, bar: tqdm = bar) -> None:
+                bar.total = total
+                bar.update(done - bar.n)
+
+            summary = generate_sequence(member, folder, seed=seed, frames=frames, on_frame=advance)
+        per_scan_ms = 1000 * (summary.seconds - summary.build_seconds) / summary.n_frames
+        typer.echo(
+            f"{member.name}: {summary.n_frames} scans, {summary.duration_s:.1f} s, "
+            f"{summary.length_m:.0f} m -> {folder} ({summary.seconds:.1f} s: "
+            f"{summary.build_seconds:.1f} s setup, {per_scan_ms:.0f} ms/scan)"
+        )
+        if plot:
+            from radar_slam.sim.figure import save_overview  # matplotlib only when asked
+
+            figure = folder / FIGURE_NAME
+            save_overview(build_scene(member, seed), figure, n_frames=summary.n_frames)
+            typer.echo(f"figure: {figure}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add `simulate` to the CLI app."""
+    app.command("simulate")(simulate_command)

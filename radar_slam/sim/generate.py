@@ -1,0 +1,242 @@
+"""Generate a simulated sequence: lay out the town, populate it, drive, render, write.
+
+`generate_sequence` writes the MulRan layout (see writer.py) into a folder; everything is
+deterministic for a scenario and seed (town, contents, route speeds, speckle, noise), and each
+scan has its own random stream, so any frame can be re-rendered alone.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radar_slam.errors import RadarSlamError
+from radar_slam.sim.render import Renderer
+from radar_slam.sim.route import Trajectory, drive, route_edges
+from radar_slam.sim.scenarios import Scenario
+from radar_slam.sim.sensor import NS_PER_S
+from radar_slam.sim.town import Town, generate_town
+from radar_slam.sim.world import World, build_world
+from radar_slam.sim.writer import (
+    COMPLETE_MARKER,
+    WORLD_FILE,
+    ScanWriter,
+    write_global_pose,
+    write_json,
+    write_stamps,
+)
+
+logger = logging.getLogger(__name__)
+
+SIM_VERSION = "1.1"
+"""Bump when the output for a given scenario and seed changes (regenerates cached sequences)."""
+GT_PERIOD_NS = 10_000_000
+"""global_pose.csv is sampled at 100 Hz, plus a row at every scan time [ns]."""
+ROUTE_STREAM, FRAME_STREAM = 2, 3
+"""Random streams (with the seed and session) of the route speeds and of each scan."""
+
+
+@dataclass
+class Scene:
+    """Everything needed to render a scenario.
+
+    Attributes:
+        scenario: the scenario.
+        seed: the seed used.
+        town: the layout.
+        world: scatterers, occluders and traffic of the scenario's session.
+        trajectory: the ego vehicle's base poses over time (town frame).
+        n_frames: number of scans the route provides (after the scenario's cap).
+    """
+
+    scenario: Scenario
+    seed: int
+    town: Town
+    world: World
+    trajectory: Trajectory
+    n_frames: int
+
+    @property
+    def period_ns(self) -> int:
+        return self.scenario.sensor.scan_period_ns
+
+    def scan_end_offsets_ns(self, n_frames: int) -> NDArray[np.int64]:
+        """(n,) end-of-sweep times of the first n scans relative to the start [ns]."""
+        return (np.arange(n_frames, dtype=np.int64) + 1) * self.period_ns
+
+    def radar_poses(self, offsets_ns: NDArray[np.int64]) -> NDArray[np.float64]:
+        """T_world_radar (n, 3) at times relative to the start [ns], dataset world frame."""
+        poses = self.trajectory.radar_poses(offsets_ns.astype(np.float64) / NS_PER_S)
+        poses[:, :2] += self.scenario.origin_xy
+        return poses
+
+    def base_poses(self, offsets_ns: NDArray[np.int64]) -> NDArray[np.float64]:
+        """T_world_base (n, 3) at times relative to the start [ns], dataset world frame."""
+        poses = self.trajectory.base_poses(offsets_ns.astype(np.float64) / NS_PER_S)
+        poses[:, :2] += self.scenario.origin_xy
+        return poses
+
+
+def frame_rng(scene: Scene, index: int) -> np.random.Generator:
+    """The random stream of scan `index` (speckle, noise, ghost phases)."""
+    return np.random.default_rng([scene.seed, scene.scenario.session, FRAME_STREAM, index])
+
+
+def render_frame(scene: Scene, renderer: Renderer, index: int) -> NDArray[np.uint8]:
+    """Scan `index` (n_azimuths, n_bins) exactly as `generate_sequence` writes it."""
+    end_s = float(scene.scan_end_offsets_ns(index + 1)[-1]) / NS_PER_S
+    return renderer.scan(end_s, frame_rng(scene, index))
+
+
+def make_renderer(scene: Scene) -> Renderer:
+    """The renderer of a scene."""
+    return Renderer(scene.world, scene.trajectory, scene.scenario.sensor, scene.scenario.physics)
+
+
+def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
+    """Lay out, populate and drive a scenario (no rendering)."""
+    seed = scenario.seed if seed is None else int(seed)
+    protected = set().union(*(route_edges(list(r)) for r in scenario.town_routes))
+    town = generate_town(seed, scenario.town, protected)
+    route_rng = np.random.default_rng([seed, scenario.session, ROUTE_STREAM])
+    trajectory = drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    world = build_world(
+        town, scenario.objects, seed, scenario.session, duration_s=trajectory.duration_s
+    )
+    available = int(round(trajectory.duration_s * NS_PER_S)) // scenario.sensor.scan_period_ns
+    n_frames = available if scenario.max_frames is None else min(available, scenario.max_frames)
+    return Scene(scenario, seed, town, world, trajectory, n_frames)
+
+
+@dataclass(frozen=True)
+class GeneratedSequence:
+    """Summary of a written sequence.
+
+    Attributes:
+        folder: the sequence folder.
+        scenario: scenario name.
+        seed: seed used.
+        n_frames: scans written.
+        duration_s: time span of the scans [s].
+        length_m: distance driven during the scans [m].
+        seconds: wall time of the generation [s].
+        build_seconds: part of it spent laying out the town and driving (before rendering) [s].
+    """
+
+    folder: Path
+    scenario: str
+    seed: int
+    n_frames: int
+    duration_s: float
+    length_m: float
+    seconds: float
+    build_seconds: float
+
+
+def generate_sequence(
+    scenario: Scenario,
+    folder: Path,
+    seed: int | None = None,
+    frames: int | None = None,
+    workers: int = 1,
+    on_frame: Callable[[int, int], None] | None = None,
+) -> GeneratedSequence:
+    """Generate `scenario` into `folder` (created; files in it are overwritten).
+
+    The completion marker is written last, so a folder without it is a half-written sequence.
+
+    Args:
+        scenario: what to simulate.
+        folder: the sequence folder.
+        seed: seed (default: the scenario's).
+        frames: number of scans (default: the whole route, or the scenario's cap).
+        workers: background PNG writer threads (0: write inline).
+        on_frame: called with (frames done, total) after each scan.
+
+    Raises:
+        RadarSlamError: more frames requested than the route provides.
+    """
+    started = time.perf_counter()
+    scene = build_scene(scenario, seed)
+    build_seconds = time.perf_counter() - started
+    n_frames = scene.n_frames if frames is None else int(frames)
+    if not 0 < n_frames <= scene.n_frames:
+        raise RadarSlamError(
+            f"scenario {scenario.name!r} provides 1 to {scene.n_frames} frames, "
+            f"{n_frames} requested"
+        )
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    renderer = make_renderer(scene)
+    ends = scene.scan_end_offsets_ns(n_frames)
+    stamps = scenario.start_ns + ends
+    logger.info(
+        "generating %s (seed %d): %d scans into %s", scenario.name, scene.seed, n_frames, folder
+    )
+    with ScanWriter(folder, workers) as writer:
+        for k in range(n_frames):
+            writer.write(int(stamps[k]), render_frame(scene, renderer, k))
+            if on_frame is not None:
+                on_frame(k + 1, n_frames)
+    write_stamps(folder, stamps)
+    gt_offsets = np.union1d(np.arange(0, int(ends[-1]) + 1, GT_PERIOD_NS, dtype=np.int64), ends)
+    write_global_pose(folder, scenario.start_ns + gt_offsets, scene.base_poses(gt_offsets))
+    moved = np.hypot(*np.diff(scene.base_poses(gt_offsets)[:, :2], axis=0).T).sum()
+    summary = GeneratedSequence(
+        folder=folder,
+        scenario=scenario.name,
+        seed=scene.seed,
+        n_frames=n_frames,
+        duration_s=float(ends[-1]) / NS_PER_S,
+        length_m=float(moved),
+        seconds=time.perf_counter() - started,
+        build_seconds=build_seconds,
+    )
+    description = {
+        "simulator_version": SIM_VERSION,
+        "scenario": scenario.name,
+        "description": scenario.description,
+        "seed": scene.seed,
+        "session": scenario.session,
+        "frames": n_frames,
+        "start_ns": scenario.start_ns,
+        "duration_s": summary.duration_s,
+        "length_m": summary.length_m,
+        "route_length_m": scene.trajectory.length_m,
+        "origin_xy": scenario.origin_xy,
+        "waypoints": scenario.waypoints,
+        "frames_convention": "file name = time of the last azimuth; poses in global_pose.csv are "
+        "the vehicle base; T_world_radar = T_world_base * MULRAN_T_BASE_RADAR",
+        "sensor": scenario.sensor,
+        "physics": scenario.physics,
+        "town": scenario.town,
+        "objects": scenario.objects,
+        "driving": scenario.driving,
+        "world_stats": {
+            "scatterers": len(scene.world.scatterers),
+            "occluders": len(scene.world.occluders.loss_db),
+            "buildings": len(scene.town.buildings),
+            "roads": len(scene.town.roads),
+            "moving_vehicles": len(scene.world.traffic),
+        },
+    }
+    write_json(folder / WORLD_FILE, description)
+    write_json(
+        folder / COMPLETE_MARKER,
+        {
+            "simulator_version": SIM_VERSION,
+            "scenario": scenario.name,
+            "seed": scene.seed,
+            "frames": n_frames,
+        },
+    )
+    logger.info(
+        "%s: %d scans, %.0f m in %.1f s", folder, n_frames, summary.length_m, summary.seconds
+    )
+    return summary

@@ -1,0 +1,214 @@
+"""Named simulation scenarios, deterministic from a seed.
+
+Routes are lattice waypoints (see route.py); the town is laid out with every route of the
+scenario's group protected, so the two sessions of `multisession` share exactly the same town.
+
+| scenario | what | scans | route |
+| --- | --- | --- | --- |
+| tiny | 3 x 3 blocks, 1024 bins (61 m): unit tests | 60 | 130 m |
+| loop | a two-block loop driven twice, same direction (the default) | 557 | 1.35 km |
+| reverse | streets driven out and back the opposite way, lanes 3.5 m apart | 562 | 1.4 km |
+| multisession_a | session A of a town shared with multisession_b | 351 | 0.9 km |
+| multisession_b | another route sharing streets; cars, vegetation, traffic changed | 522 | 1.2 km |
+| long | three loops, revisits in both directions: benchmarks | 1588 | 4.2 km |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from radar_slam.errors import RadarSlamError
+from radar_slam.sim.physics import PhysicsConfig
+from radar_slam.sim.route import DrivingConfig
+from radar_slam.sim.sensor import SensorConfig
+from radar_slam.sim.town import TownConfig
+from radar_slam.sim.world import ObjectConfig
+
+Waypoints = tuple[tuple[int, int], ...]
+
+EPOCH_NS = 1_567_000_000_000_000_000
+"""Start of the default scenarios' clocks (late August 2019, like MulRan) [ns]."""
+DAY_NS = 86_400 * 1_000_000_000
+MULRAN_LIKE_ORIGIN = (353_000.0, 4_026_000.0)
+"""Offset added to the town frame in global_pose.csv (UTM-like metres, as MulRan's KAIST)."""
+TINY_BINS = 1024
+"""Range bins of the `tiny` scenario (61 m at the CIR204-H bin size)."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named, seeded simulation.
+
+    Attributes:
+        name: scenario (and sequence folder) name.
+        description: one line for humans.
+        seed: default seed of the town, its contents and the noise.
+        waypoints: the ego route (lattice indices).
+        town_routes: every route whose streets the town must keep (the group's routes).
+        session: session index (parked cars, vegetation, traffic and noise differ per session).
+        max_frames: cap on the number of scans (None: as long as the route lasts).
+        start_ns: time of the first scan's first column [ns].
+        origin_xy: offset of the town frame in the written poses [m].
+        sensor, physics, town, objects, driving: configuration sections.
+    """
+
+    name: str
+    description: str
+    seed: int
+    waypoints: Waypoints
+    town_routes: tuple[Waypoints, ...]
+    session: int = 0
+    max_frames: int | None = None
+    start_ns: int = EPOCH_NS
+    origin_xy: tuple[float, float] = MULRAN_LIKE_ORIGIN
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    town: TownConfig = field(default_factory=TownConfig)
+    objects: ObjectConfig = field(default_factory=ObjectConfig)
+    driving: DrivingConfig = field(default_factory=DrivingConfig)
+
+
+_TINY_ROUTE: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2))
+_LOOP_ROUTE: Waypoints = (
+    (2, 2),
+    (4, 2),
+    (4, 3),
+    (2, 3),
+    (2, 2),
+    (4, 2),
+    (4, 3),
+    (2, 3),
+    (2, 2),
+    (3, 2),
+)
+_REVERSE_ROUTE: Waypoints = (
+    (1, 1),
+    (4, 1),
+    (4, 3),
+    (5, 3),
+    (5, 4),
+    (4, 4),
+    (4, 3),
+    (4, 1),
+    (1, 1),
+    (1, 2),
+)
+_MULTI_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (2, 1))
+_MULTI_B: Waypoints = (
+    (4, 4),
+    (4, 2),
+    (3, 2),
+    (3, 3),
+    (1, 3),
+    (1, 2),
+    (2, 2),
+    (2, 4),
+    (4, 4),
+    (4, 3),
+)
+_LONG_ROUTE: Waypoints = (
+    (1, 1),
+    (4, 1),
+    (4, 3),
+    (1, 3),
+    (1, 1),
+    (4, 1),
+    (7, 1),
+    (7, 4),
+    (4, 4),
+    (4, 1),
+    (1, 1),
+    (1, 3),
+    (4, 3),
+    (4, 5),
+    (1, 5),
+    (1, 3),
+    (2, 3),
+)
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        Scenario(
+            name="tiny",
+            description="3 x 3 blocks, 1024 bins (61 m), 60 scans: for unit tests",
+            seed=11,
+            waypoints=_TINY_ROUTE,
+            town_routes=(_TINY_ROUTE,),
+            max_frames=60,
+            start_ns=EPOCH_NS + 1 * DAY_NS,
+            sensor=SensorConfig(n_bins=TINY_BINS),
+            town=TownConfig(n_blocks=(3, 3), block_size_m=(60.0, 90.0)),
+        ),
+        Scenario(
+            name="loop",
+            description="a two-block loop driven twice in the same direction (~2 min)",
+            seed=7,
+            waypoints=_LOOP_ROUTE,
+            town_routes=(_LOOP_ROUTE,),
+            start_ns=EPOCH_NS + 2 * DAY_NS,
+        ),
+        Scenario(
+            name="reverse",
+            description="streets driven out and back in the opposite direction, 3.5 m lane offset",
+            seed=5,
+            waypoints=_REVERSE_ROUTE,
+            town_routes=(_REVERSE_ROUTE,),
+            start_ns=EPOCH_NS + 3 * DAY_NS,
+        ),
+        Scenario(
+            name="multisession_a",
+            description="session A of a town shared with multisession_b",
+            seed=9,
+            waypoints=_MULTI_A,
+            town_routes=(_MULTI_A, _MULTI_B),
+            session=0,
+            start_ns=EPOCH_NS + 4 * DAY_NS,
+        ),
+        Scenario(
+            name="multisession_b",
+            description="session B: another route a day later; parked cars, vegetation and "
+            "traffic changed",
+            seed=9,
+            waypoints=_MULTI_B,
+            town_routes=(_MULTI_A, _MULTI_B),
+            session=1,
+            start_ns=EPOCH_NS + 5 * DAY_NS,
+        ),
+        Scenario(
+            name="long",
+            description="4.5 km through a larger town: three loops, revisits in both directions",
+            seed=3,
+            waypoints=_LONG_ROUTE,
+            town_routes=(_LONG_ROUTE,),
+            start_ns=EPOCH_NS + 6 * DAY_NS,
+            town=TownConfig(n_blocks=(8, 7)),
+        ),
+    )
+}
+"""Every scenario by name."""
+
+GROUPS: dict[str, tuple[str, ...]] = {"multisession": ("multisession_a", "multisession_b")}
+"""Names that stand for several sequences generated together."""
+
+DEFAULT_SCENARIO = "loop"
+
+
+def get_scenario(name: str) -> Scenario:
+    """The scenario called `name`.
+
+    Raises:
+        RadarSlamError: unknown name (the message lists the known ones).
+    """
+    try:
+        return SCENARIOS[name]
+    except KeyError:
+        known = ", ".join(list(SCENARIOS) + list(GROUPS))
+        raise RadarSlamError(f"unknown scenario {name!r}; known scenarios: {known}") from None
+
+
+def expand(name: str) -> list[Scenario]:
+    """The scenarios a name stands for: itself, or the members of a group."""
+    if name in GROUPS:
+        return [get_scenario(member) for member in GROUPS[name]]
+    return [get_scenario(name)]

@@ -92,7 +92,7 @@ class DescriptorConfig:
     n_freq: int = 32
     max_freq_cpm: float = 0.25
     pad_factor: int = 2
-    magnitude: MagnitudeTransform = "linear"
+    magnitude: MagnitudeTransform = "sqrt"
 
 
 @dataclass(frozen=True)
@@ -132,7 +132,7 @@ class RetrievalConfig:
     coarse_candidates: int = 25
     neighbour_radius: int = 2
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
-    loop_threshold: float = 0.25
+    loop_threshold: float = 0.2
 
 
 @dataclass(frozen=True)
@@ -188,7 +188,7 @@ class ScanContextConfig:
     max_range_m: float = 80.0
     n_candidates: int = 10
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
-    loop_threshold: float = 0.3
+    loop_threshold: float = 0.2
 
 
 @dataclass(frozen=True)

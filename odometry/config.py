@@ -124,6 +124,9 @@ class QualityConfig:
         gap_sigma_xy_m: standard deviation given to a constant-velocity prediction that covers a
             failed registration [m].
         gap_sigma_yaw_deg: the same for its rotation [deg].
+        velocity_lag_fraction: in `Odometry`, the error of the velocity that moves a pose from
+            mid-sweep to the scan's reference time is taken as this fraction of the velocity's
+            last change (it lags an accelerating or turning vehicle), per axis.
     """
 
     min_peak_quality: float = 6.0
@@ -132,11 +135,12 @@ class QualityConfig:
     max_yaw_rate_dps: float = 120.0
     max_prediction_error_m: float = 1.5
     max_prediction_error_deg: float = 5.0
-    min_sigma_xy_m: float = 0.02
-    min_sigma_yaw_deg: float = 0.05
+    min_sigma_xy_m: float = 0.01
+    min_sigma_yaw_deg: float = 0.02
     sigma_scale: float = 3.0
     gap_sigma_xy_m: float = 1.0
     gap_sigma_yaw_deg: float = 5.0
+    velocity_lag_fraction: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -165,10 +169,18 @@ class DeskewConfig:
             times.
         iterations: `estimate_motion` re-registers this many extra times with the velocity of its
             own previous estimate (the `Odometry` class uses the running velocity instead).
+        mid_sweep: de-skew the images to the mid-sweep pose and register those (a velocity
+            error then smears an image symmetrically instead of displacing it); the motion
+            between the scans' reference times follows with the velocity.
+        yaw_rate_extrapolation: in `Odometry`, the yaw rate wanted at a time (to de-skew a scan,
+            or to move a pose from mid-sweep to the reference time) is the last measured one
+            plus this fraction of its trend extrapolated to that time (0: constant velocity).
     """
 
     enabled: bool = True
     iterations: int = 1
+    mid_sweep: bool = True
+    yaw_rate_extrapolation: float = 1.0
 
 
 def _coarse() -> LevelConfig:

@@ -3,8 +3,16 @@
 `Odometry(config).register(frame)` is called once per scan, in time order. Each scan is registered
 against the current keyframe (fewer, longer registrations drift less than chaining every pair);
 the scan becomes the new keyframe when it has moved or turned far enough from the keyframe, when
-the correlation peak weakens (overlap fading), or after `max_frames` scans. Scans are de-skewed
-with the running velocity (constant-velocity model over the sweep).
+the correlation peak weakens (overlap fading), or after `max_frames` scans.
+
+Motion distortion: each scan is de-skewed with the running velocity to its mid-sweep pose (its
+*image pose*, see `registration.PreparedScan`), where an error of that velocity only smears the
+image symmetrically instead of displacing it; registrations chain the image poses. A scan's pose
+at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
+measured between the last two image poses; that move's error does not accumulate, and its
+covariance is added to the registration's. The velocity used for de-skewing follows the trend of
+the yaw rate (`DeskewConfig.yaw_rate_extrapolation`): in a turn the yaw rate changes by several
+degrees per second from one scan to the next, and a stale one bends the de-skewed image.
 
 A failed registration (weak peak, implausible or off-prediction motion) is retried against the
 previous scan (which then becomes the reference and the scan the new keyframe); if that fails
@@ -26,9 +34,9 @@ from odometry import OdometryError
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.preprocess import preprocess_polar
-from odometry.registration import MotionEstimate, PreparedScan, register
+from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
-from odometry.se2 import between, compose
+from odometry.se2 import between, compose, inverse
 
 logger = logging.getLogger(__name__)
 
@@ -50,7 +58,10 @@ class OdometryResult:
         pose: (3,) T_world_radar (x, y [m], yaw [rad]) at `timestamp_ns`; the world frame is the
             first scan's radar frame moved to `start_pose`.
         motion: (3,) this scan's pose in the previous scan's frame (zeros for the first scan).
-        covariance: (3, 3) covariance of `motion` [m^2, m rad, rad^2], order (x, y, yaw).
+        covariance: (3, 3) covariance [m^2, m rad, rad^2], order (x, y, yaw), of this scan's
+            pose relative to the scan it was registered against (`keyframe_motion`): the
+            registration's plus both moves from mid-sweep to the reference times; expressed in
+            the previous scan's axes, so that it also serves (conservatively) for `motion`.
         keyframe_index: index of the scan it was registered against (the keyframe, or the
             previous scan after a failure; itself for the first scan; the keyframe for a gap).
         keyframe_motion: (3,) this scan's pose in that scan's frame.
@@ -77,17 +88,47 @@ class OdometryResult:
 
 @dataclass
 class _Keyframe:
+    """A registered scan: its pose at its reference time and the pose of its image frame
+    (`image_pose`, world frame; see `PreparedScan`), which the registrations chain."""
+
     index: int
     pose: FloatArray
+    image_pose: FloatArray
     scan: PreparedScan
     frames: int = 0
+    conversion_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
+    """Covariance (own axes) that moving the image pose to the reference time adds to `pose`."""
+
+
+@dataclass(frozen=True)
+class _Velocity:
+    """The running body velocity: the twist (vx, vy [m/s], yaw rate [rad/s]) measured between
+    the last two image poses, at the middle of that interval (`time_ns`), and the trend of its
+    yaw rate [rad/s^2]."""
+
+    twist: FloatArray
+    time_ns: int
+    yaw_acceleration: float = 0.0
+
+    def at(self, time_ns: int, trend_gain: float) -> FloatArray:
+        """The twist expected at `time_ns`: constant, plus `trend_gain` times the yaw-rate trend
+        extrapolated linearly."""
+        twist = self.twist.copy()
+        twist[2] += trend_gain * self.yaw_acceleration * (time_ns - self.time_ns) / NS_PER_S
+        return twist
+
+    def updated(self, twist: FloatArray, time_ns: int) -> _Velocity:
+        """The velocity after measuring `twist` over an interval centred at `time_ns`."""
+        span_s = (time_ns - self.time_ns) / NS_PER_S
+        trend = (twist[2] - self.twist[2]) / span_s if span_s > 0 else 0.0
+        return _Velocity(twist=twist, time_ns=time_ns, yaw_acceleration=float(trend))
 
 
 @dataclass
 class _State:
     keyframe: _Keyframe | None = None
     previous: _Keyframe | None = None  # the previous scan (same fields as a keyframe)
-    twist: FloatArray | None = None  # running body velocity (vx, vy, yaw rate)
+    velocity: _Velocity | None = None
     results: list[OdometryResult] = field(default_factory=list)
 
 
@@ -135,7 +176,10 @@ class Odometry:
     @property
     def velocity(self) -> FloatArray | None:
         """(3,) current body velocity estimate (vx, vy [m/s], yaw rate [rad/s]) or None."""
-        return None if self._state.twist is None else self._state.twist.copy()
+        state = self._state
+        if state.velocity is None or state.previous is None:
+            return None
+        return state.velocity.at(state.previous.scan.timestamp_ns, self._trend_gain)
 
     def reset(self) -> None:
         """Forget every scan (the next one starts again at `start_pose`)."""
@@ -150,11 +194,17 @@ class Odometry:
         """
         state, cfg = self._state, self.config
         index = len(state.results)
-        twist = state.twist if cfg.deskew.enabled else None
-        scan = PreparedScan(preprocess_polar(frame, cfg.preprocess), twist, cfg)
+        polar = preprocess_polar(frame, cfg.preprocess)
+        twist = None
+        if state.velocity is not None and cfg.deskew.enabled:
+            twist = state.velocity.at(
+                polar.timestamp_ns + _ns(polar.mid_sweep_s or 0.0), self._trend_gain
+            )
+        scan = PreparedScan(polar, twist, cfg)
 
         if state.keyframe is None or state.previous is None:
-            node = _Keyframe(index=index, pose=self.start_pose.copy(), scan=scan)
+            start = self.start_pose.copy()
+            node = _Keyframe(index=index, pose=start, image_pose=start.copy(), scan=scan)
             state.keyframe = state.previous = node
             return self._record(
                 node,
@@ -174,15 +224,19 @@ class Odometry:
                 f"scan {index} at {frame.timestamp_ns} ns is not later than the previous scan at "
                 f"{previous.scan.timestamp_ns} ns"
             )
-        predicted = None
-        if state.twist is not None:
-            predicted = compose(previous.pose, motion_from_twist(state.twist, dt_s))
+        predicted = None  # the image pose the constant-velocity model expects
+        if state.velocity is not None:
+            interval_s = _image_interval_s(previous, scan, dt_s)
+            twist = state.velocity.at(_image_time_ns(previous.scan), self._trend_gain)
+            predicted = compose(previous.image_pose, motion_from_twist(twist, interval_s))
 
         keyframe = state.keyframe
         references = [keyframe] if previous is keyframe else [keyframe, previous]
         estimate = None
         for reference in references:
-            estimate = self._checked(register(reference.scan, scan, cfg), reference, predicted)
+            estimate = self._checked(
+                register_images(reference.scan, scan, cfg), reference, predicted
+            )
             if estimate.ok:
                 break
             logger.info(
@@ -195,11 +249,25 @@ class Odometry:
         if not estimate.ok:
             return self._gap(index, scan, dt_s, predicted, estimate)
 
-        pose = compose(reference.pose, estimate.motion)
+        if state.velocity is None:
+            self._place_first_images(reference, scan, estimate.motion)
+        image_pose = compose(reference.image_pose, estimate.motion)
+        change = self._update_velocity(previous, scan, image_pose, dt_s)
+        pose = self._reference_pose(image_pose, scan)
+        node = _Keyframe(
+            index=index,
+            pose=pose,
+            image_pose=image_pose,
+            scan=scan,
+            conversion_covariance=self._conversion_covariance(
+                estimate.covariance, change, scan, _image_interval_s(previous, scan, dt_s)
+            ),
+        )
         motion = between(previous.pose, pose)
-        covariance = _rotate_covariance(estimate.covariance, between(previous.pose, reference.pose))
-        state.twist = twist_from_motion(motion, dt_s)
-        node = _Keyframe(index=index, pose=pose, scan=scan)
+        covariance = _rotate_covariance(
+            _factor_covariance(estimate.covariance, reference, node),
+            between(previous.pose, reference.pose),
+        )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
             node.scan = self._refreshed(node.scan)
@@ -214,7 +282,7 @@ class Odometry:
             motion=motion,
             covariance=covariance,
             reference=reference,
-            reference_motion=estimate.motion,
+            reference_motion=between(reference.pose, pose),
             is_keyframe=new_keyframe,
             ok=True,
             quality=estimate.quality,
@@ -224,11 +292,13 @@ class Odometry:
     def _checked(
         self, estimate: MotionEstimate, reference: _Keyframe, predicted: FloatArray | None
     ) -> MotionEstimate:
-        """Reject an estimate far from the constant-velocity prediction (direction of travel)."""
+        """Reject an estimate far from the constant-velocity prediction (direction of travel).
+
+        `estimate` and `predicted` are image poses (see `_Keyframe`)."""
         if not estimate.ok or predicted is None:
             return estimate
         qcfg = self.config.quality
-        expected = between(reference.pose, predicted)
+        expected = between(reference.image_pose, predicted)
         off = estimate.motion - expected
         off_yaw = abs(float(np.arctan2(np.sin(off[2]), np.cos(off[2]))))
         if np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m and off_yaw <= np.deg2rad(
@@ -241,6 +311,68 @@ class Odometry:
         )
         return dataclasses.replace(estimate, ok=False, reason=reason)
 
+    def _place_first_images(
+        self, reference: _Keyframe, scan: PreparedScan, image_motion: FloatArray
+    ) -> None:
+        """Place the image frames of the scans registered before any velocity was known.
+
+        Their poses are fixed (the first is `start_pose`), but where their images were seen
+        from (mid-sweep, when used) needs the velocity, which the first registration gives.
+        """
+        state = self._state
+        dt_s = (scan.timestamp_ns - reference.scan.timestamp_ns) / NS_PER_S
+        twist = twist_from_motion(image_motion, _image_interval_s(reference, scan, dt_s))
+        for node in {id(n): n for n in (state.keyframe, state.previous, reference) if n}.values():
+            node.image_pose = compose(node.pose, motion_from_twist(twist, node.scan.image_time_s))
+
+    @property
+    def _trend_gain(self) -> float:
+        return self.config.deskew.yaw_rate_extrapolation
+
+    def _update_velocity(
+        self, previous: _Keyframe, scan: PreparedScan, image_pose: FloatArray, dt_s: float
+    ) -> FloatArray:
+        """Measure the twist between the previous image pose and this scan's; returns its change
+        from the last measurement (zeros for the first)."""
+        state = self._state
+        twist = twist_from_motion(
+            between(previous.image_pose, image_pose), _image_interval_s(previous, scan, dt_s)
+        )
+        centre_ns = (_image_time_ns(previous.scan) + _image_time_ns(scan)) // 2
+        if state.velocity is None:
+            state.velocity = _Velocity(twist=twist, time_ns=centre_ns)
+            return np.zeros(3)
+        change = twist - state.velocity.twist
+        state.velocity = state.velocity.updated(twist, centre_ns)
+        return change
+
+    def _conversion_covariance(
+        self,
+        registration_covariance: FloatArray,
+        velocity_change: FloatArray,
+        scan: PreparedScan,
+        interval_s: float,
+    ) -> FloatArray:
+        """Covariance (scan axes) of moving a scan's image pose to its reference time.
+
+        The offset is the velocity times `image_time_s`; the velocity is a difference of two
+        image poses `interval_s` apart (about twice a registration's covariance over the interval
+        squared) and lags a changing velocity by a fraction of its last change.
+        """
+        if scan.image_time_s == 0.0 or interval_s <= 0:
+            return np.zeros((3, 3))
+        lag = self.config.quality.velocity_lag_fraction * np.asarray(velocity_change)
+        velocity_covariance = 2.0 * registration_covariance / interval_s**2 + np.diag(lag * lag)
+        return scan.image_time_s**2 * velocity_covariance
+
+    def _reference_pose(self, image_pose: FloatArray, scan: PreparedScan) -> FloatArray:
+        """T_world_radar at the scan's reference time from its image pose, with the velocity
+        expected between the two times."""
+        assert self._state.velocity is not None
+        centre_ns = (_image_time_ns(scan) + scan.timestamp_ns) // 2
+        twist = self._state.velocity.at(centre_ns, self._trend_gain)
+        return compose(image_pose, inverse(motion_from_twist(twist, scan.image_time_s)))
+
     def _needs_keyframe(self, estimate: MotionEstimate, keyframe: _Keyframe) -> bool:
         kcfg = self.config.keyframe
         return bool(
@@ -252,10 +384,11 @@ class Odometry:
 
     def _refreshed(self, scan: PreparedScan) -> PreparedScan:
         """Re-render a new keyframe whose de-skew velocity is stale (e.g. the first scans)."""
-        new = self._state.twist if self.config.deskew.enabled else None
-        used = scan.twist
-        if new is None or scan.polar.timing is None:
+        velocity = self._state.velocity
+        if velocity is None or not self.config.deskew.enabled or scan.polar.timing is None:
             return scan
+        new = velocity.at(_image_time_ns(scan), self._trend_gain)
+        used = scan.twist
         if used is not None and (
             np.hypot(*(new[:2] - used[:2])) <= TWIST_REFRESH_MPS
             and abs(new[2] - used[2]) <= TWIST_REFRESH_RADPS
@@ -275,15 +408,18 @@ class Odometry:
         state, qcfg = self._state, self.config.quality
         previous = state.previous
         assert previous is not None
-        if predicted is None:  # no velocity yet: the prediction is standing still, flagged
-            predicted = previous.pose.copy()
+        if predicted is None or state.velocity is None:
+            # No velocity yet: the prediction is standing still, flagged.
+            pose, image_pose = previous.pose.copy(), previous.pose.copy()
+        else:
+            pose, image_pose = self._reference_pose(predicted, scan), predicted
         logger.warning(
             "scan %d: registration failed (%s); constant-velocity gap", index, failed.reason
         )
-        motion = between(previous.pose, predicted)
+        motion = between(previous.pose, pose)
         sigma_yaw = np.deg2rad(qcfg.gap_sigma_yaw_deg)
         covariance = np.diag([qcfg.gap_sigma_xy_m**2, qcfg.gap_sigma_xy_m**2, sigma_yaw**2])
-        node = _Keyframe(index=index, pose=predicted, scan=scan)
+        node = _Keyframe(index=index, pose=pose, image_pose=image_pose, scan=scan)
         state.previous = node  # the keyframe stays: the next scan tries it first
         keyframe = state.keyframe
         assert keyframe is not None
@@ -292,7 +428,7 @@ class Odometry:
             motion=motion,
             covariance=covariance,
             reference=keyframe,
-            reference_motion=between(keyframe.pose, predicted),
+            reference_motion=between(keyframe.pose, pose),
             is_keyframe=False,
             ok=False,
             quality=0.0,
@@ -333,13 +469,35 @@ class Odometry:
         return result
 
 
-def _rotate_covariance(covariance: FloatArray, keyframe_in_previous: FloatArray) -> FloatArray:
-    """A keyframe-to-scan covariance (keyframe axes) turned into the previous scan's axes.
+def _image_interval_s(previous: _Keyframe, scan: PreparedScan, dt_s: float) -> float:
+    """Time [s] from `previous`'s image time to `scan`'s, `dt_s` apart in reference time."""
+    return dt_s + scan.image_time_s - previous.scan.image_time_s
 
-    Used as the covariance of the previous-to-current motion: conservative, since it ignores
-    that registrations against the same keyframe share its errors (which partly cancel).
-    """
-    pose = keyframe_in_previous
-    c, s = np.cos(pose[2]), np.sin(pose[2])
+
+def _ns(seconds: float) -> int:
+    return int(round(seconds * NS_PER_S))
+
+
+def _image_time_ns(scan: PreparedScan) -> int:
+    """Absolute time of a scan's image frame [ns]."""
+    return scan.timestamp_ns + _ns(scan.image_time_s)
+
+
+def _factor_covariance(
+    registration_covariance: FloatArray, reference: _Keyframe, node: _Keyframe
+) -> FloatArray:
+    """Covariance (reference axes) of `node`'s pose in `reference`'s frame: the registration of
+    the image frames (reference image axes) plus both conversions to reference times."""
+    return (
+        _rotate_covariance(registration_covariance, between(reference.pose, reference.image_pose))
+        + reference.conversion_covariance
+        + _rotate_covariance(node.conversion_covariance, between(reference.pose, node.pose))
+    )
+
+
+def _rotate_covariance(covariance: FloatArray, frame_in_target: FloatArray) -> FloatArray:
+    """A covariance (3, 3) whose translation is in one frame, expressed in the axes of a target
+    frame in which that frame has pose `frame_in_target` (3,)."""
+    c, s = np.cos(frame_in_target[2]), np.sin(frame_in_target[2])
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return rot @ covariance @ rot.T

@@ -80,6 +80,15 @@ class PolarScan:
     def max_range_m(self) -> float:
         return float(self.image.shape[1] * self.bin_size_m)
 
+    @property
+    def mid_sweep_s(self) -> float | None:
+        """Mean acquisition time of the rows relative to the reference time [s] (None without
+        azimuth times): the time whose pose a scan de-skewed to it depends least on the velocity
+        used."""
+        if self.timing is None:
+            return None
+        return self.timing.first_row_s + 0.5 * (self.n_azimuths - 1) * self.timing.row_period_s
+
 
 @dataclass(frozen=True)
 class CartesianLevel:
@@ -251,18 +260,21 @@ def sample_scan(
     bearing_rad: FloatImage,
     rotation_rad: float = 0.0,
     twist: NDArray[np.float64] | None = None,
+    time_offset_s: float = 0.0,
 ) -> FloatImage:
     """Sample a conditioned scan at arbitrary points (bilinear, 0 beyond its range).
 
     Args:
         polar: the conditioned scan.
         x_m, y_m, range_m, bearing_rad: (H, W) the points [m, rad] in a frame centred on the
-            sensor at the scan's reference time, turned by `rotation_rad` from the scan's frame.
+            sensor at the de-skew time (the scan's reference time + `time_offset_s`), turned by
+            `rotation_rad` from the scan's frame.
         rotation_rad: the scan appears rotated by this angle [rad] (CCW): a return at bearing b in
             the scan's frame is sampled at bearing b + rotation_rad.
         twist: (3,) body velocity (vx [m/s], vy [m/s], yaw rate [rad/s]) of the sensor during the
-            sweep, for de-skewing to the scan's reference time; None (or a scan without times)
-            samples the scan as measured.
+            sweep, for de-skewing; None (or a scan without times) samples the scan as measured.
+        time_offset_s: the scan is de-skewed to the sensor pose at this time after its reference
+            time [s] (negative: before); ignored without de-skewing.
 
     Returns:
         (H, W) float32 intensities.
@@ -279,7 +291,9 @@ def sample_scan(
         bin_size_m=polar.bin_size_m,
         rotation_rad=rotation_rad,
         twist=twist,
-        timing=None if timing is None else (timing.first_row_s, timing.row_period_s),
+        timing=None
+        if timing is None
+        else (timing.first_row_s - time_offset_s, timing.row_period_s),
     )
     return remap(polar.image, bins, rows)
 
@@ -289,14 +303,22 @@ def render_cartesian(
     level: CartesianLevel,
     rotation_rad: float = 0.0,
     twist: NDArray[np.float64] | None = None,
+    time_offset_s: float = 0.0,
 ) -> FloatImage:
     """The windowed Cartesian image (size_px, size_px) float32 of a conditioned scan.
 
-    `rotation_rad` and `twist` as in `sample_scan`; the image is multiplied by the level's
-    apodisation window.
+    `rotation_rad`, `twist` and `time_offset_s` as in `sample_scan`; the image is multiplied by
+    the level's apodisation window.
     """
     image = sample_scan(
-        polar, level.x_m, level.y_m, level.range_m, level.bearing_rad, rotation_rad, twist
+        polar,
+        level.x_m,
+        level.y_m,
+        level.range_m,
+        level.bearing_rad,
+        rotation_rad,
+        twist,
+        time_offset_s,
     )
     image *= level.window
     return image

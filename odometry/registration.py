@@ -5,7 +5,9 @@
 
 1. Both scans are conditioned (`preprocess_polar`) and rendered as windowed Cartesian images;
    the coarse level (wide, low resolution) is made at once, the fine level (near range, full
-   resolution) when the scan serves as a reference.
+   resolution) when the scan serves as a reference. With a velocity, the images are de-skewed
+   to the mid-sweep pose (`PreparedScan.image_pose`); `register_images` returns the motion
+   between those image frames and `register` moves it to the scans' reference times.
 2. Rotation: Fourier-Mellin on the coarse spectra (`odometry.rotation`), known modulo pi.
 3. Translation: `cur` is re-rendered rotated into `prev`'s orientation (rotation folded into the
    polar sampling maps, so no second interpolation); both half-turn hypotheses are phase
@@ -21,6 +23,7 @@ scan once and keeps a reference's spectra while registering many scans against i
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 from dataclasses import dataclass, field
@@ -29,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import twist_from_motion
+from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.phase_correlation import (
     HalfSpectrum,
     Peak,
@@ -38,6 +41,7 @@ from odometry.phase_correlation import (
     locate_peak,
 )
 from odometry.preprocess import (
+    CartesianLevel,
     PolarScan,
     cartesian_level,
     preprocess_polar,
@@ -53,7 +57,7 @@ from odometry.rotation import (
     signature,
 )
 from odometry.scan import Scan
-from odometry.se2 import wrap_angle
+from odometry.se2 import compose, inverse, wrap_angle
 
 logger = logging.getLogger(__name__)
 
@@ -100,9 +104,18 @@ class MotionEstimate:
 class PreparedScan:
     """A conditioned scan with the spectra registration needs, computed once.
 
+    The images show the scene from the sensor pose at the scan's *image time*: mid-sweep when
+    the scan is de-skewed and `cfg.deskew.mid_sweep` is set (an error in the velocity then only
+    smears the image symmetrically instead of displacing it), the reference time otherwise.
+    `image_pose` is that pose in the scan's reference frame, under the de-skew velocity.
+
     Attributes:
         polar: the conditioned polar scan.
         twist: (3,) body velocity used for de-skewing (None: as measured).
+        image_time_s: image time relative to the scan's reference time [s] (0 when de-skewing
+            is disabled or the scan has no azimuth times).
+        image_pose: (3,) T_reference_image, the image frame in the reference frame under
+            `twist` (zeros without a twist).
         empty: nothing is left after conditioning (the scan cannot be registered).
         coarse_spectrum: half spectrum of the unrotated coarse image.
         rotation_signature: Fourier-Mellin signature of the coarse image.
@@ -113,7 +126,17 @@ class PreparedScan:
         self.empty = not bool(np.any(polar.image > 0))
         self.twist = None if twist is None or polar.timing is None else np.asarray(twist, float)
         self.cfg = cfg
-        coarse = render_cartesian(polar, cartesian_level(cfg.coarse), 0.0, self.twist)
+        mid = polar.mid_sweep_s
+        use_mid = cfg.deskew.enabled and cfg.deskew.mid_sweep and mid is not None
+        # Without a velocity the image is the scan as measured, whose mean viewpoint is the
+        # mid-sweep pose too (its offset from the reference pose is unknown: zeros).
+        self.image_time_s = float(mid) if use_mid and mid is not None else 0.0
+        self.image_pose: FloatArray = (
+            motion_from_twist(self.twist, self.image_time_s)
+            if self.twist is not None
+            else np.zeros(3)
+        )
+        coarse = self._render(cartesian_level(cfg.coarse), 0.0)
         self.coarse_spectrum: HalfSpectrum = forward(coarse)
         self.rotation_signature: Signature = signature(self.coarse_spectrum, cfg.rotation)
 
@@ -121,19 +144,30 @@ class PreparedScan:
     def timestamp_ns(self) -> int:
         return self.polar.timestamp_ns
 
+    def _render(self, level: CartesianLevel, rotation_rad: float) -> NDArray[np.float32]:
+        """The scan's windowed image on `level`, turned by `rotation_rad`, at its image time."""
+        return render_cartesian(self.polar, level, rotation_rad, self.twist, self.image_time_s)
+
+    def _sample(
+        self,
+        points: tuple[
+            NDArray[np.float32], NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]
+        ],
+        rotation_rad: float,
+    ) -> NDArray[np.float32]:
+        """The scan sampled at (x, y, range, bearing) points of its image frame."""
+        return sample_scan(self.polar, *points, rotation_rad, self.twist, self.image_time_s)
+
     @functools.cached_property
     def fine_spectrum(self) -> HalfSpectrum:
         """Half spectrum of the unrotated fine image (made when the scan is a reference)."""
-        image = render_cartesian(self.polar, cartesian_level(self.cfg.fine), 0.0, self.twist)
-        return forward(image)
+        return forward(self._render(cartesian_level(self.cfg.fine), 0.0))
 
     @functools.cached_property
     def refine_image(self) -> NDArray[np.float32]:
         """The scan on the rotation-refinement polar grid (made when the scan is a reference)."""
         grid = polar_grid(self.cfg.rotation)
-        return sample_scan(
-            self.polar, grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad, 0.0, self.twist
-        )
+        return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
 
 
 def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) -> PreparedScan:
@@ -175,19 +209,46 @@ def _residual_rotation(
     """Rotation left after rendering `cur` through (translation, yaw) onto the polar grid about
     `ref`'s sensor."""
     grid = polar_grid(cfg.rotation)
-    x, y, rng, bearing = grid.shifted(float(translation[0]), float(translation[1]))
-    moved = sample_scan(cur.polar, x, y, rng, bearing, yaw, cur.twist)
+    moved = cur._sample(grid.shifted(float(translation[0]), float(translation[1])), yaw)
     return refine_rotation(ref.refine_image, moved, cfg.rotation)
 
 
 def register(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> MotionEstimate:
-    """Pose of `cur` in the frame of `ref` from their prepared images (see module docstring)."""
+    """Pose of `cur` in the frame of `ref` between their reference times (see the module
+    docstring): `register_images` moved from the image frames to the reference frames."""
+    estimate = register_images(ref, cur, cfg)
+    return dataclasses.replace(
+        estimate,
+        motion=image_to_reference(estimate.motion, ref, cur),
+        covariance=rotate_covariance(estimate.covariance, float(ref.image_pose[2])),
+        coarse_motion=image_to_reference(estimate.coarse_motion, ref, cur),
+    )
+
+
+def image_to_reference(
+    image_motion: FloatArray, ref: PreparedScan, cur: PreparedScan
+) -> FloatArray:
+    """T_ref_cur between the scans' reference times from T between their image frames."""
+    return compose(compose(ref.image_pose, image_motion), inverse(cur.image_pose))
+
+
+def rotate_covariance(covariance: FloatArray, yaw_rad: float) -> FloatArray:
+    """A (3, 3) covariance whose translation is in a frame turned by `yaw_rad` relative to the
+    one wanted, expressed in the wanted frame (x, y, yaw order)."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return rot @ covariance @ rot.T
+
+
+def register_images(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> MotionEstimate:
+    """Pose of `cur`'s image frame in `ref`'s image frame (see `PreparedScan`); the covariance's
+    translation is in `ref`'s image frame."""
     coarse_level = cartesian_level(cfg.coarse)
     tcfg = cfg.translation
     rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, cfg.rotation)
 
     # Coarse translation for both half-turn hypotheses.
-    image = render_cartesian(cur.polar, coarse_level, rotation.angle_rad, cur.twist)
+    image = cur._render(coarse_level, rotation.angle_rad)
     spectrum = forward(image)
     shape = image.shape
     hypotheses = []
@@ -209,7 +270,7 @@ def register(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> Motio
     peak, cell = coarse_peak, coarse_level.cell_m
     if tcfg.use_fine:
         fine_level = cartesian_level(cfg.fine)
-        fine = render_cartesian(cur.polar, fine_level, yaw, cur.twist)
+        fine = cur._render(fine_level, yaw)
         centre = t_coarse / fine_level.cell_m
         surface = correlate(
             ref.fine_spectrum, forward(fine), fine.shape, tcfg.smoothing_px, tcfg.whitening

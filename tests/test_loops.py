@@ -1,0 +1,336 @@
+"""Loop closing: geometric verification on simulated scans, covariance from quality, the pairwise
+consistency gate, the detector's decisions, and robustness to 30 % false loops (gate + graph)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from odometry.se2 import accumulate, between, compose, relative_motions
+from radar_slam.datasets.frame import RadarFrame, Sequence
+from radar_slam.datasets.synthetic import open_synthetic
+from radar_slam.graph import GraphConfig, PoseGraph
+from radar_slam.loops import (
+    ConsistencyConfig,
+    ConsistencyGate,
+    GeometricVerifier,
+    KeyScan,
+    LoopClosureConfig,
+    LoopClosureError,
+    LoopCovarianceConfig,
+    LoopDetector,
+    NullLoopDetector,
+    VerifiedLoop,
+    cycle_mahalanobis,
+    is_true_loop,
+    loop_covariance,
+    make_loop_detector,
+    motion_compensated,
+)
+from radar_slam.sim.generate import generate_sequence
+from radar_slam.sim.scenarios import get_scenario
+from raplace.retrieval import Candidate, PlaceRecognizer
+
+SCAN_PERIOD_S = 0.25
+TRUE_TOLERANCE_M = 0.3
+TRUE_TOLERANCE_DEG = 1.0
+NOISE_LEVEL = 200  # uint8 counts of uniform noise added to degrade a scan
+MAX_ATE_RISE = 0.10
+LAP_GAP_NS = 60_000_000_000  # the second pass starts a minute after the first ends
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
+    """The simulator's `tiny` scenario (60 scans, 1024 bins, about 100 m, no revisit)."""
+    folder = tmp_path_factory.mktemp("loops") / "tiny"
+    generate_sequence(get_scenario("tiny"), folder)
+    return open_synthetic(folder)
+
+
+def gt_relative(sequence: Sequence, i: int, j: int) -> np.ndarray:
+    gt = sequence.ground_truth
+    assert gt is not None
+    return between(gt[i], gt[j])
+
+
+def twist(sequence: Sequence, k: int) -> np.ndarray:
+    """Ground-truth body velocity of scan k (vx, vy, yaw rate) from the neighbouring scans."""
+    motion = gt_relative(sequence, k - 1, k)
+    return motion / SCAN_PERIOD_S
+
+
+def key_scan(sequence: Sequence, k: int, frame: RadarFrame | None = None) -> KeyScan:
+    frame = sequence[k] if frame is None else frame
+    return KeyScan(k, frame.timestamp_ns, frame, twist(sequence, k))
+
+
+def test_verifier_accepts_a_revisit_and_rejects_a_wrong_candidate(tiny: Sequence) -> None:
+    verify = GeometricVerifier(LoopClosureConfig())
+    query, near, far = 40, 36, 5
+    result = verify(key_scan(tiny, query), key_scan(tiny, near))
+    assert result.ok, result.reason
+    error = between(gt_relative(tiny, query, near), result.measurement)
+    assert np.hypot(*error[:2]) < TRUE_TOLERANCE_M
+    assert abs(np.rad2deg(error[2])) < TRUE_TOLERANCE_DEG
+    assert np.all(np.linalg.eigvalsh(result.covariance) > 0)
+
+    wrong = verify(key_scan(tiny, query), key_scan(tiny, far))
+    assert not wrong.ok
+    assert wrong.reason  # recorded, e.g. "weak sinogram alignment (...)"
+    assert np.all(np.isnan(wrong.covariance))
+
+
+def test_loop_covariance_grows_as_quality_falls() -> None:
+    cfg = LoopCovarianceConfig()
+    width_px2, cell_m, scale = 2.0, 0.25, 3.0  # a peak like the odometry's fine level
+
+    def peak_covariance(quality: float) -> np.ndarray:
+        sigma2 = width_px2 * cell_m**2 * scale**2 / quality**2
+        return np.diag([sigma2, sigma2, (np.deg2rad(2.0) / quality) ** 2])
+
+    covs = [loop_covariance(peak_covariance(q), np.zeros(3), 0.3, cfg) for q in (5, 10, 40, 160)]
+    traces = [np.trace(c) for c in covs]
+    assert traces == sorted(traces, reverse=True)
+    for worse, better in zip(covs[:-1], covs[1:], strict=True):
+        assert np.all(np.linalg.eigvalsh(worse - better) >= -1e-12)  # worse >= better (PSD)
+    floor = loop_covariance(np.zeros((3, 3)), np.zeros(3), 0.0, cfg)
+    assert np.allclose(np.diag(floor)[:2], cfg.min_sigma_xy_m**2)
+    # Disagreement between the two estimates inflates it too.
+    disagree = loop_covariance(np.zeros((3, 3)), np.array([0.5, 0.0, 0.01]), 0.0, cfg)
+    assert np.trace(disagree) > np.trace(floor)
+
+
+def test_verified_covariance_reflects_the_match_quality(tiny: Sequence) -> None:
+    peak_only = LoopCovarianceConfig(disagreement_weight=0.0, min_sigma_xy_m=1e-3)
+    verify = GeometricVerifier(LoopClosureConfig(covariance=peak_only))
+    clean = verify(key_scan(tiny, 40), key_scan(tiny, 37))
+    frame = tiny[37]
+    rng = np.random.default_rng(0)
+    noise = rng.integers(0, NOISE_LEVEL, frame.polar.shape)
+    noisy_polar = np.clip(frame.polar.astype(np.int32) + noise, 0, 255).astype(np.uint8)
+    noisy_frame = dataclasses.replace(frame, polar=noisy_polar)
+    noisy = verify(key_scan(tiny, 40), key_scan(tiny, 37, noisy_frame))
+    assert clean.ok and noisy.ok, (clean.reason, noisy.reason)
+    assert noisy.refined_quality < 0.8 * clean.refined_quality
+    assert np.trace(noisy.covariance[:2, :2]) > np.trace(clean.covariance[:2, :2])
+
+
+def test_motion_compensation_moves_opposite_scans_by_speed_times_sweep(tiny: Sequence) -> None:
+    frame = tiny[10]
+    speed = 10.0
+    moving = np.array([speed, 0.0, 0.0])
+    query = KeyScan(0, frame.timestamp_ns, frame, moving)
+    match = KeyScan(1, frame.timestamp_ns, frame, moving)
+    times = np.asarray(frame.azimuth_times_ns, dtype=np.float64)
+    mean_offset_s = float(np.mean(times - frame.timestamp_ns)) / 1e9
+    facing = np.array([0.0, 0.0, np.pi])  # the match faces the other way
+    corrected = motion_compensated(facing, query, match)
+    assert np.isclose(corrected[0], 2 * speed * mean_offset_s)  # about -2.5 m at 10 m/s
+    same = motion_compensated(np.zeros(3), query, match)
+    assert np.allclose(same, 0.0, atol=1e-12)  # same direction and speed: cancels
+
+
+def loop(
+    decision: int,
+    q: int,
+    m: int,
+    z: np.ndarray,
+    poses: np.ndarray,
+    path: np.ndarray,
+    sigma: float = 0.1,
+) -> VerifiedLoop:
+    cov = np.diag([sigma**2, sigma**2, np.deg2rad(0.5) ** 2])
+    return VerifiedLoop(decision, q, m, z, cov, poses[q], poses[m], path[q], path[m])
+
+
+def square_laps(laps: int = 2, side_m: float = 60.0, step_m: float = 1.0) -> np.ndarray:
+    """Ground truth (N, 3) driving a square `laps` times counter-clockwise, one pose per step."""
+    per_side = int(side_m / step_m)
+    motions = []
+    for _ in range(laps * 4):
+        motions += [np.array([step_m, 0.0, 0.0])] * (per_side - 1)
+        motions.append(np.array([step_m, 0.0, np.pi / 2]))
+    return accumulate(np.array(motions))
+
+
+def drifting_odometry(gt: np.ndarray, yaw_bias_rad: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    motions = relative_motions(gt)
+    motions[:, 2] += yaw_bias_rad
+    motions[:, :2] += rng.normal(0, 0.01, motions[:, :2].shape)
+    return accumulate(motions)
+
+
+def path_lengths(poses: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
+
+
+def test_gate_accepts_consistent_loops_and_rejects_contradictions() -> None:
+    gt = square_laps()
+    odo = drifting_odometry(gt, np.deg2rad(0.05), seed=1)
+    path = path_lengths(odo)
+    gate = ConsistencyGate(ConsistencyConfig())
+    first = 240 + 10
+    q1, m1, q2, m2 = first, 10, first + 4, 14
+    changes = gate.add(loop(0, q1, m1, between(gt[q1], gt[m1]), odo, path))
+    assert changes == {0: "pending"}  # no support yet
+    changes = gate.add(loop(1, q2, m2, between(gt[q2], gt[m2]), odo, path))
+    assert changes == {0: "accepted", 1: "accepted"}
+    q3, m3 = first + 8, 18
+    wrong = compose(between(gt[q3], gt[m3]), np.array([4.0, -3.0, 0.2]))
+    changes = gate.add(loop(2, q3, m3, wrong, odo, path))
+    assert changes == {2: "rejected"}
+    assert "inconsistent" in gate.reasons[2]
+    # A lone loop far from the others expires unsupported.
+    q4, m4 = first + 100, 110
+    assert gate.add(loop(3, q4, m4, between(gt[q4], gt[m4]), odo, path)) == {3: "pending"}
+    assert gate.expire(path[q4] + ConsistencyConfig().window_m + 1.0) == {3: "rejected"}
+    assert "unsupported" in gate.reasons[3]
+
+
+def test_cycle_mahalanobis_is_small_for_true_and_large_for_false_loops() -> None:
+    gt = square_laps()
+    odo = drifting_odometry(gt, np.deg2rad(0.1), seed=2)  # 24 deg drift per lap
+    path = path_lengths(odo)
+    cfg = ConsistencyConfig()
+    a = loop(0, 250, 10, between(gt[250], gt[10]), odo, path)
+    b = loop(1, 256, 16, between(gt[256], gt[16]), odo, path)
+    bad = loop(2, 256, 16, compose(between(gt[256], gt[16]), np.array([3.0, 0, 0])), odo, path)
+    assert cycle_mahalanobis(b, [a], cfg)[0] < cfg.chi2_threshold
+    assert cycle_mahalanobis(bad, [a], cfg)[0] > cfg.chi2_threshold
+
+
+def ate(est: np.ndarray, gt: np.ndarray) -> float:
+    """RMS position error after aligning the first poses (test helper)."""
+    aligned = compose(compose(gt[0], between(est[0], np.zeros(3))), est)
+    return float(np.sqrt(np.mean(np.sum((aligned[:, :2] - gt[:, :2]) ** 2, axis=1))))
+
+
+def slam_with_loops(
+    odo: np.ndarray, loops: list[VerifiedLoop], odo_sigma: float
+) -> tuple[np.ndarray, list[int]]:
+    """Feed the loops in time order through the gate, build and optimise the graph."""
+    gate = ConsistencyGate(ConsistencyConfig())
+    accepted: dict[int, VerifiedLoop] = {}
+    for candidate in sorted(loops, key=lambda c: c.query_key):
+        gate.expire(candidate.query_path_m)
+        changes = gate.add(candidate)
+        for decision, status in changes.items():
+            if status == "accepted":
+                accepted[decision] = next(c for c in loops if c.decision == decision)
+    graph = PoseGraph(GraphConfig())
+    motions = relative_motions(odo)
+    cov = np.diag([odo_sigma**2, odo_sigma**2, np.deg2rad(0.1) ** 2])
+    graph.add_keyframe(0, odo[0])
+    for k, z in enumerate(motions, start=1):
+        graph.add_keyframe(k, odo[k])
+        graph.add_odometry(k - 1, k, z, cov)
+    for c in accepted.values():
+        graph.add_loop(c.query_key, c.match_key, c.measurement, c.covariance)
+    graph.update()
+    return graph.optimize_final(), sorted(accepted)
+
+
+def test_thirty_percent_false_loops_barely_change_the_result() -> None:
+    """Robustness bar: 30 % false loops that pass verification raise the SLAM ATE <= 10 %."""
+    gt = square_laps()
+    odo = drifting_odometry(gt, np.deg2rad(0.08), seed=3)
+    path = path_lengths(odo)
+    rng = np.random.default_rng(4)
+    lap = 240
+    true_loops = []
+    for q in range(lap + 2, 2 * lap - 2, 3):
+        m = q - lap
+        z = compose(between(gt[q], gt[m]), rng.normal(0, [0.05, 0.05, 0.002]))
+        true_loops.append(loop(len(true_loops), q, m, z, odo, path))
+    n_false = int(round(0.3 / 0.7 * len(true_loops)))
+    false_loops = []
+    for n in range(n_false):
+        q = int(rng.integers(lap + 2, 2 * lap - 2))
+        m = int((q - lap + rng.integers(40, lap - 40)) % lap)  # at least 40 m from the truth
+        z = np.array([rng.uniform(-3, 3), rng.uniform(-3, 3), rng.uniform(-0.2, 0.2)])
+        false_loops.append(loop(len(true_loops) + n, q, m, z, odo, path))
+    odometry_ate = ate(odo, gt)
+    clean, _ = slam_with_loops(odo, true_loops, 0.05)
+    dirty, accepted = slam_with_loops(odo, true_loops + false_loops, 0.05)
+    false_ids = {c.decision for c in false_loops}
+    assert not false_ids & set(accepted), "a false loop was accepted"
+    assert ate(clean, gt) < 0.3 * odometry_ate
+    assert ate(dirty, gt) <= (1 + MAX_ATE_RISE) * ate(clean, gt)
+
+
+class InjectOnce:
+    """A place database that returns a chosen wrong candidate first for one query."""
+
+    def __init__(self, inner: PlaceRecognizer, at_query: int, wrong_key: int) -> None:
+        self.inner = inner
+        self.at_query = at_query
+        self.wrong_key = wrong_key
+        self.queries = 0
+
+    def add(self, descriptor: np.ndarray, key: int, time_s: float | None = None) -> None:
+        self.inner.add(descriptor, key, time_s)
+
+    def query(self, descriptor: np.ndarray, k: int = 1, time_s: float | None = None):
+        self.queries += 1
+        found = self.inner.query(descriptor, k, time_s)
+        if self.queries == self.at_query:
+            return [Candidate(self.wrong_key, 0, 0.0, 0.0, np.pi), *found]
+        return found
+
+
+def test_detector_records_every_decision_with_a_reason(tiny: Sequence) -> None:
+    """A revisit: the tiny drive, then its first half again (every other scan, so the scans
+    differ from the first pass) a lap later, with ground-truth poses; one wrong candidate is
+    forced into the queries."""
+    cfg = dataclasses.replace(LoopClosureConfig(), query_spacing_m=0.0)  # every scan queries
+    gt = tiny.ground_truth
+    assert gt is not None
+    n = len(tiny)
+    lap_ns = int(tiny.timestamps_ns[-1] - tiny.timestamps_ns[0]) + LAP_GAP_NS
+    scans = [(k, 0) for k in range(n)] + [(k, lap_ns) for k in range(1, n // 2, 2)]
+
+    def frame(k: int, shift_ns: int) -> RadarFrame:
+        f = tiny[k]
+        times = f.azimuth_times_ns
+        assert times is not None
+        return dataclasses.replace(
+            f, timestamp_ns=f.timestamp_ns + shift_ns, azimuth_times_ns=times + shift_ns
+        )
+
+    wrong_key = n - 1  # the far end of the first pass
+    recognizer = InjectOnce(PlaceRecognizer(cfg.raplace.retrieval), n + 5, wrong_key)
+    detector = LoopDetector(cfg, recognizer=recognizer)
+    accepted = []
+    for key, (k, shift) in enumerate(scans):
+        accepted += detector.add(frame(k, shift), gt[k], key)
+    accepted += detector.finish()
+    decisions = detector.decisions
+    assert accepted and len(accepted) == sum(d.accepted for d in decisions)
+    for d in decisions:
+        assert d.reason and d.status in ("accepted", "rejected")
+        if d.accepted:
+            assert is_true_loop(d.measurement, gt[scans[d.query_key][0]], gt[scans[d.match_key][0]])
+    forced = [d for d in decisions if d.match_key == wrong_key]
+    assert forced and not forced[0].accepted
+    assert "sinogram" in forced[0].reason or "phase" in forced[0].reason
+
+
+def test_null_detector_does_nothing(tiny: Sequence) -> None:
+    null = make_loop_detector(LoopClosureConfig(enabled=False))
+    assert isinstance(null, NullLoopDetector)
+    assert null.add(tiny[0], np.zeros(3), 0) == [] and null.finish() == []
+    assert null.decisions == [] and null.tally() == (0, 0)
+
+
+def test_detector_without_poses_keeps_scans_and_checks_keys(tiny: Sequence) -> None:
+    detector = LoopDetector(LoopClosureConfig())
+    detector.add(tiny[0])
+    detector.add(tiny[1])
+    assert len(detector) == 2  # without poses every scan is a database entry
+    with pytest.raises(LoopClosureError, match="pose for every scan"):
+        detector.add(tiny[2], np.zeros(3))
+    with pytest.raises(LoopClosureError, match="keys increase"):
+        detector.add(tiny[2], key=0)

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from odometry import Odometry, OdometryConfig, OdometryResult
 from radar_slam.config import configs_dir, merge, read_yaml
+from radar_slam.datasets import DatasetConfig, open_sequence
 from radar_slam.datasets.frame import RadarFrame, Sequence
 from radar_slam.errors import ConfigError, RadarSlamError, TrajectoryError
 from radar_slam.g2o import G2oGraph, g2o_to_pose_graph
@@ -68,6 +69,7 @@ BACKEND_REJECT_WEIGHT = 0.5
 class PipelineConfig:
     """All settings of a SLAM run, one section per stage (each stage gets only its own)."""
 
+    dataset: DatasetConfig = field(default_factory=DatasetConfig)
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
@@ -98,6 +100,22 @@ def load_config(
     if overrides:
         config = merge(PipelineConfig, config, overrides, "overrides")
     return config
+
+
+def open_configured(
+    spec: str, data_root: Path | None = None, path: Path | None = None
+) -> tuple[Sequence, PipelineConfig]:
+    """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`).
+
+    The family, known only once the sequence is found, selects the shipped overrides; when the
+    configuration's `dataset` section changes loader settings, the sequence is opened again
+    with them (opening is lazy: no scan is read).
+    """
+    sequence = open_sequence(spec, data_root)
+    config = load_config(sequence.family, path)
+    if config.dataset.loader_options():
+        sequence = open_sequence(spec, data_root, config.dataset)
+    return sequence, config
 
 
 # --------------------------------------------------------------------------- results

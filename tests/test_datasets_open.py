@@ -5,9 +5,11 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from radar_slam.datasets import (
+    DatasetConfig,
     MulRanSequence,
     OxfordSequence,
     data_root,
@@ -114,3 +116,28 @@ def test_family_resolver_is_used(
     monkeypatch.setitem(registry_module._FAMILIES, "generated", fake)
     assert isinstance(open_sequence("generated/loop", data_root=root), MulRanSequence)
     assert calls == [(root, "loop")]
+
+
+def test_dataset_options_reach_the_loader(oxford_dir: Path) -> None:
+    """The `dataset:` config section overrides the loader's range resolution (Oxford: SDK value)."""
+    default = open_sequence(oxford_dir)
+    sdk = open_sequence(oxford_dir, options=DatasetConfig(range_resolution_m=0.0432))
+    assert default[0].range_resolution_m == pytest.approx(0.0438)
+    assert sdk[0].range_resolution_m == pytest.approx(0.0432)
+    np.testing.assert_array_equal(sdk[0].polar, default[0].polar)
+
+
+def test_pipeline_config_dataset_section(tmp_path: Path, oxford_dir: Path) -> None:
+    """`configs/oxford.yaml` and a user file set the resolution; an unknown key is an error."""
+    from radar_slam.errors import ConfigError
+    from radar_slam.pipeline import open_configured
+
+    sequence, config = open_configured(str(oxford_dir))
+    assert config.dataset.range_resolution_m == pytest.approx(0.0438)
+    user = tmp_path / "sdk.yaml"
+    user.write_text("dataset:\n  range_resolution_m: 0.0432\n")
+    sequence, config = open_configured(str(oxford_dir), path=user)
+    assert sequence[0].range_resolution_m == pytest.approx(0.0432)
+    user.write_text("dataset:\n  range_resolution: 0.0432\n")
+    with pytest.raises(ConfigError, match="unknown key 'range_resolution'"):
+        open_configured(str(oxford_dir), path=user)

@@ -15,10 +15,9 @@ import typer
 
 from radar_slam.commands.data import DATA_ROOT_OPTION
 from radar_slam.commands.run import progress_bar
-from radar_slam.datasets import open_sequence
 from radar_slam.errors import ResultsError
 from radar_slam.g2o import read_g2o, write_pose_graph
-from radar_slam.pipeline import close_loops_on_graph, load_config
+from radar_slam.pipeline import close_loops_on_graph, open_configured
 
 
 def loops_command(
@@ -45,8 +44,7 @@ def loops_command(
     if out.resolve() == graph.resolve():
         raise ResultsError(f"{out}: would overwrite the input graph; choose another --out")
     record = read_g2o(graph)
-    seq = open_sequence(sequence, data_root)
-    settings = load_config(seq.family, config)
+    seq, settings = open_configured(sequence, data_root, config)
     with progress_bar(len(seq), f"{seq.family}/{seq.name}") as update:
         run = close_loops_on_graph(record, seq, settings, progress=update)
     write_pose_graph(out, run.graph)

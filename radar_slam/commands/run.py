@@ -16,7 +16,6 @@ import typer
 from tqdm import tqdm  # type: ignore[import-untyped]
 
 from radar_slam.commands.data import DATA_ROOT_OPTION
-from radar_slam.datasets import open_sequence
 from radar_slam.errors import ResultsError
 from radar_slam.outputs import (
     odometry_summary,
@@ -30,7 +29,7 @@ from radar_slam.pipeline import (
     Progress,
     ProgressCallback,
     frame_count,
-    load_config,
+    open_configured,
     run_odometry,
 )
 from radar_slam.results import result_dir
@@ -95,8 +94,7 @@ def run_command(
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
     check_out(out)
-    seq = open_sequence(sequence, data_root)
-    settings = load_config(seq.family, config)
+    seq, settings = open_configured(sequence, data_root, config)
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
@@ -118,8 +116,7 @@ def odometry_command(
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
     check_out(out)
-    seq = open_sequence(sequence, data_root)
-    settings = load_config(seq.family, config)
+    seq, settings = open_configured(sequence, data_root, config)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}", loops=False) as update:
         run = run_odometry(seq, settings, max_frames=max_frames, progress=update)

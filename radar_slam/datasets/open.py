@@ -7,7 +7,13 @@ from pathlib import Path
 
 from radar_slam.datasets import registry
 from radar_slam.datasets.frame import Sequence
-from radar_slam.datasets.registry import Family, detect_family, families, family_folder
+from radar_slam.datasets.registry import (
+    DatasetConfig,
+    Family,
+    detect_family,
+    families,
+    family_folder,
+)
 from radar_slam.errors import DatasetNotFoundError
 
 SPEC_SEPARATOR = "/"
@@ -38,7 +44,9 @@ def sequence_folder(root: Path, family: Family, sequence: str) -> Path:
 
 
 def open_sequence(
-    spec: str | os.PathLike[str], data_root: str | os.PathLike[str] | None = None
+    spec: str | os.PathLike[str],
+    data_root: str | os.PathLike[str] | None = None,
+    options: DatasetConfig | None = None,
 ) -> Sequence:
     """Open a sequence named `family/sequence` or given as a path to its folder.
 
@@ -48,12 +56,16 @@ def open_sequence(
     folder path whose family is detected from its layout; a bare name that is not a folder is
     also looked for as `<root>/<family>/<name>` in every family without a resolver.
 
+    `options` (the `dataset:` config section) overrides loader settings such as the range
+    resolution.
+
     Raises:
         DatasetNotFoundError: nothing found; the message names every place looked in, the
             expected layouts and where to obtain the data.
         DatasetFormatError: the folder was found but its content is malformed.
     """
     root = registry.data_root(data_root)
+    loader_options = (options or DatasetConfig()).loader_options()
     looked_in: list[Path] = []
     candidates: list[Family] = list(families().values())
     named = _split_family_spec(spec) if isinstance(spec, str) else None
@@ -62,13 +74,13 @@ def open_sequence(
         candidates = [family]
         folder = sequence_folder(root, family, sequence)
         if folder.is_dir():
-            return family.open(folder)
+            return family.open(folder, **loader_options)
         looked_in.append(folder.absolute())
     path = Path(spec).expanduser()
     if path.is_dir():
         detected = detect_family(path)
         if detected is not None:
-            return detected.open(path)
+            return detected.open(path, **loader_options)
         raise DatasetNotFoundError(
             f"{path} exists but matches no known dataset layout; expected one of:\n"
             f"{_layouts_and_sources(candidates)}"
@@ -80,7 +92,7 @@ def open_sequence(
                 continue
             folder = family_folder(root, family.name) / spec.strip(SPEC_SEPARATOR)
             if folder.is_dir() and family.detect(folder):
-                return family.open(folder)
+                return family.open(folder, **loader_options)
             looked_in.append(folder.absolute())
     places = "\n".join(f"  {place}" for place in dict.fromkeys(looked_in))
     known = ", ".join(sorted(families())) or "none registered"

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 from radar_slam.datasets.frame import Sequence
 
@@ -14,12 +15,30 @@ DEFAULT_DATA_ROOT = Path("data")
 
 
 @dataclass(frozen=True)
+class DatasetConfig:
+    """Loader settings a user may need to override: the `dataset:` section of a config file.
+
+    Attributes:
+        range_resolution_m: size of one range bin [m]; None keeps the loader's own value (Oxford:
+            0.0438 from the dataset documentation, while the official SDK hard-codes 0.0432;
+            MulRan: 0.05952; synthetic: the simulated sensor's).
+    """
+
+    range_resolution_m: float | None = None
+
+    def loader_options(self) -> dict[str, Any]:
+        """The keyword arguments to pass to a family's `open` (only the values that are set)."""
+        return {key: value for key, value in asdict(self).items() if value is not None}
+
+
+@dataclass(frozen=True)
 class Family:
     """A dataset family.
 
     Attributes:
         name: family key, e.g. "mulran".
-        open: builds a Sequence from a sequence folder.
+        open: builds a Sequence from a sequence folder; accepts the keyword arguments of
+            `DatasetConfig.loader_options()`.
         detect: True when a folder looks like a sequence of this family.
         layout: human description of the expected folder layout (for error messages).
         obtain: where the dataset can be obtained (for error messages).
@@ -31,7 +50,7 @@ class Family:
     """
 
     name: str
-    open: Callable[[Path], Sequence]
+    open: Callable[..., Sequence]
     detect: Callable[[Path], bool]
     layout: str
     obtain: str

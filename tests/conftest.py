@@ -1,10 +1,15 @@
-"""Shared fixtures: locations of the real radar samples in ../shared/data."""
+"""Shared fixtures: locations of the real radar samples in ../shared/data, and a data root
+where the small simulated sequences (`synthetic/tiny`, `synthetic/tiny_loop`) are generated once
+per test session."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
+
+from radar_slam.datasets import open_sequence
+from radar_slam.datasets.frame import Sequence
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 OXFORD_SEQ = SHARED_DATA / "oxford" / "2019-01-10-14-36-48-partial"
@@ -33,3 +38,23 @@ def oxford_dir() -> Path:
 def mulran_raw_dir() -> Path:
     """One real MulRan scan: raw CSV and the polar PNG."""
     return _require(MULRAN_RAW)
+
+
+@pytest.fixture(scope="session")
+def synthetic_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A data root shared by the session's tests: `synthetic/<scenario>` is generated into it on
+    first use (by a fixture below or by a CLI run) and reused afterwards."""
+    return tmp_path_factory.mktemp("data")
+
+
+@pytest.fixture(scope="session")
+def tiny(synthetic_root: Path) -> Sequence:
+    """`synthetic/tiny`: 60 scans of 1024 bins (generated in about a second)."""
+    return open_sequence("synthetic/tiny", synthetic_root)
+
+
+@pytest.fixture(scope="session")
+def tiny_loop(synthetic_root: Path) -> Sequence:
+    """`synthetic/tiny_loop`: a small loop with a revisit, 177 scans of 1024 bins (generated in a
+    few seconds)."""
+    return open_sequence("synthetic/tiny_loop", synthetic_root)

@@ -1,16 +1,16 @@
-"""CLI smoke runs: `radar-slam run` end to end on a short simulated revisit, `--no-loops`, the
-default result folder, `radar-slam odometry`, `radar-slam loops`, and user errors."""
+"""CLI smoke runs: `radar-slam run` end to end on a short simulated revisit (`synthetic/tiny_loop`),
+`--no-loops`, the default result folder, `radar-slam odometry`, `radar-slam loops`, and user
+errors. `synthetic_root` (conftest.py) is the session's data root, where the sequences are
+generated on first use."""
 
 from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
-from test_pipeline import tiny_loop_scenario
 
 from odometry.se2 import between
 from radar_slam.cli import main
@@ -18,7 +18,6 @@ from radar_slam.datasets import open_sequence
 from radar_slam.g2o import G2oEdge, G2oGraph, read_g2o, write_g2o
 from radar_slam.outputs import LOOPS_CSV_COLUMNS, SLAM_RESULT_FILES
 from radar_slam.pipeline import SlamMetrics, load_config, run_odometry
-from radar_slam.sim.scenarios import SCENARIOS
 from radar_slam.trajectory import read_kitti, read_tum
 
 METRICS_KEYS = {
@@ -39,22 +38,15 @@ METRICS_KEYS = {
 MAX_ATE_RATIO = 0.4
 
 
-@pytest.fixture(scope="module")
-def data_root(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """A data root where `synthetic/tiny` and the test scenario `synthetic/tiny_loop` are
-    generated on first use."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setitem(SCENARIOS, "tiny_loop", tiny_loop_scenario())
-        yield tmp_path_factory.mktemp("data")
-
-
 def lines(path: Path) -> list[str]:
     return [line for line in path.read_text().splitlines() if line and not line.startswith("#")]
 
 
-def test_run_end_to_end_closes_the_loop(data_root: Path, tmp_path: Path) -> None:
+def test_run_end_to_end_closes_the_loop(synthetic_root: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
-    code = main(["run", "synthetic/tiny_loop", "--data-root", str(data_root), "--out", str(out)])
+    code = main(
+        ["run", "synthetic/tiny_loop", "--data-root", str(synthetic_root), "--out", str(out)]
+    )
     assert code == 0
     for name in (*SLAM_RESULT_FILES, "gt.tum"):
         assert (out / name).is_file(), name
@@ -62,7 +54,7 @@ def test_run_end_to_end_closes_the_loop(data_root: Path, tmp_path: Path) -> None
     assert METRICS_KEYS <= set(metrics)
     assert set(metrics) == {f.name for f in SlamMetrics.__dataclass_fields__.values()}
     frames = metrics["frames"]
-    assert frames == len(open_sequence("synthetic/tiny_loop", data_root))
+    assert frames == len(open_sequence("synthetic/tiny_loop", synthetic_root))
     for stem in ("odometry", "slam"):
         assert len(lines(out / f"{stem}.tum")) == frames
         assert len(lines(out / f"{stem}.kitti")) == frames
@@ -89,10 +81,10 @@ def test_run_end_to_end_closes_the_loop(data_root: Path, tmp_path: Path) -> None
 
 
 def test_run_without_loops_and_default_folder(
-    data_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    synthetic_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.chdir(tmp_path)
-    code = main(["run", "synthetic/tiny", "--data-root", str(data_root), "--no-loops"])
+    code = main(["run", "synthetic/tiny", "--data-root", str(synthetic_root), "--no-loops"])
     assert code == 0
     latest = tmp_path / "results" / "synthetic_tiny" / "latest"
     assert latest.is_symlink() and (latest / "metrics.json").is_file()
@@ -103,10 +95,10 @@ def test_run_without_loops_and_default_folder(
 
 
 def test_odometry_command(
-    data_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    synthetic_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "odo"
-    args = ["odometry", "synthetic/tiny", "--data-root", str(data_root), "--out", str(out)]
+    args = ["odometry", "synthetic/tiny", "--data-root", str(synthetic_root), "--out", str(out)]
     assert main([*args, "--max-frames", "40"]) == 0
     assert "ATE" in capsys.readouterr().out
     for name in ("odometry.tum", "odometry.kitti", "gt.tum", "metrics.json", "trajectory.png"):
@@ -115,14 +107,14 @@ def test_odometry_command(
     metrics = json.loads((out / "metrics.json").read_text())
     assert {"frames", "frames_per_second", "ate_rmse_m", "ate_origin_rmse_m"} <= set(metrics)
     assert "drift_trans_pct" in metrics and metrics["frames"] == 40
-    sequence = open_sequence("synthetic/tiny", data_root)
+    sequence = open_sequence("synthetic/tiny", synthetic_root)
     stamps = read_tum(out / "odometry.tum").timestamps_ns
     np.testing.assert_array_equal(stamps, sequence.timestamps_ns[:40])
 
 
-def odometry_g2o(data_root: Path, path: Path, frames: int | None = None) -> int:
+def odometry_g2o(synthetic_root: Path, path: Path, frames: int | None = None) -> int:
     """Write a g2o graph made from our odometry of synthetic/tiny; returns its vertex count."""
-    run = run_odometry(open_sequence("synthetic/tiny", data_root), max_frames=frames)
+    run = run_odometry(open_sequence("synthetic/tiny", synthetic_root), max_frames=frames)
     poses = run.trajectory.poses
     info = np.linalg.inv(np.diag([0.05**2, 0.05**2, np.deg2rad(0.2) ** 2]))
     edges = [
@@ -132,11 +124,21 @@ def odometry_g2o(data_root: Path, path: Path, frames: int | None = None) -> int:
     return len(poses)
 
 
-def test_loops_command(data_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_loops_command(
+    synthetic_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     graph = tmp_path / "odometry.g2o"
-    vertices = odometry_g2o(data_root, graph)
+    vertices = odometry_g2o(synthetic_root, graph)
     out = tmp_path / "closed.g2o"
-    args = ["loops", str(graph), "synthetic/tiny", "--data-root", str(data_root), "--out", str(out)]
+    args = [
+        "loops",
+        str(graph),
+        "synthetic/tiny",
+        "--data-root",
+        str(synthetic_root),
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     assert "accepted" in capsys.readouterr().out
     result = read_g2o(out)
@@ -145,26 +147,28 @@ def test_loops_command(data_root: Path, tmp_path: Path, capsys: pytest.CaptureFi
     assert "--force" in capsys.readouterr().err
     assert main([*args, "--force"]) == 0
     short = tmp_path / "short.g2o"
-    odometry_g2o(data_root, short, frames=10)
-    code = main(["loops", str(short), "synthetic/tiny", "--data-root", str(data_root),
+    odometry_g2o(synthetic_root, short, frames=10)
+    code = main(["loops", str(short), "synthetic/tiny", "--data-root", str(synthetic_root),
                  "--out", str(tmp_path / "x.g2o")])  # fmt: skip
     assert code == 1 and "one vertex per scan" in capsys.readouterr().err
 
 
 def test_user_errors_are_one_line(
-    data_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    synthetic_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["run", "synthetic/nosuch", "--data-root", str(data_root)]) == 1
+    assert main(["run", "synthetic/nosuch", "--data-root", str(synthetic_root)]) == 1
     err = capsys.readouterr().err
     assert err.startswith("radar-slam: error:") and "nosuch" in err
     busy = tmp_path / "busy"
     busy.mkdir()
     (busy / "keep.txt").write_text("mine")
-    assert main(["run", "synthetic/tiny", "--data-root", str(data_root), "--out", str(busy)]) == 1
+    assert (
+        main(["run", "synthetic/tiny", "--data-root", str(synthetic_root), "--out", str(busy)]) == 1
+    )
     assert "not empty" in capsys.readouterr().err
     typo = tmp_path / "typo.yaml"
     typo.write_text("loop_closure: {verfication: {}}\n")
-    args = ["odometry", "synthetic/tiny", "--data-root", str(data_root), "--config", str(typo)]
+    args = ["odometry", "synthetic/tiny", "--data-root", str(synthetic_root), "--config", str(typo)]
     assert main([*args, "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err
     assert "unknown key 'verfication'" in err and len(err.strip().splitlines()) == 1

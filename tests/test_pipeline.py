@@ -1,6 +1,7 @@
-"""The SLAM pipeline on short simulated sequences: a revisit closes the loop and the ATE drops,
-30 % injected false loops change little, loops disabled gives SLAM == odometry, configuration
-layering and strictness, and loops added to another odometry's g2o graph."""
+"""The SLAM pipeline on short simulated sequences (`synthetic/tiny_loop` and `synthetic/tiny`,
+fixtures in conftest.py): a revisit closes the loop and the ATE drops, 30 % injected false loops
+change little, loops disabled gives SLAM == odometry, configuration layering and strictness, and
+loops added to another odometry's g2o graph."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ import pytest
 
 from odometry.se2 import between
 from radar_slam.datasets.frame import Sequence
-from radar_slam.datasets.synthetic import open_synthetic
 from radar_slam.errors import ConfigError, RadarSlamError
 from radar_slam.g2o import G2oEdge, G2oGraph
 from radar_slam.loops import (
@@ -31,45 +31,14 @@ from radar_slam.pipeline import (
     close_loops_on_graph,
     load_config,
 )
-from radar_slam.sim.generate import generate_sequence
-from radar_slam.sim.scenarios import Scenario, get_scenario
 from radar_slam.trajectory import Trajectory
 from raplace.retrieval import Candidate, PlaceRecognizer
 
-TINY_LOOP_ROUTE = ((1, 1), (2, 1), (2, 2), (1, 2), (1, 1), (2, 1), (2, 2))
-"""Around one block of the tiny town and on along one and a half streets again (~180 scans)."""
-MAX_ATE_RATIO = 0.4  # SLAM / odometry ATE on tiny_loop (measured 0.26)
+MAX_ATE_RATIO = 0.4  # SLAM / odometry ATE on synthetic/tiny_loop (measured 0.19)
 FALSE_FRACTION = 0.3
 FALSE_MIN_DISTANCE_M = 50.0
 MAX_ATE_RISE = 0.10
 INJECTION_SEED = 3
-
-
-def tiny_loop_scenario() -> Scenario:
-    """The simulator's `tiny` town and sensor (1024 bins), driven around a block and on: a
-    revisit within a 40 s, ~180-scan sequence (generation takes a few seconds)."""
-    return dataclasses.replace(
-        get_scenario("tiny"),
-        name="tiny_loop",
-        description="tiny town, one block driven around and on again (tests)",
-        waypoints=TINY_LOOP_ROUTE,
-        town_routes=(TINY_LOOP_ROUTE,),
-        max_frames=None,
-    )
-
-
-@pytest.fixture(scope="module")
-def tiny_loop(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
-    folder = tmp_path_factory.mktemp("pipeline") / "tiny_loop"
-    generate_sequence(tiny_loop_scenario(), folder)
-    return open_synthetic(folder)
-
-
-@pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
-    folder = tmp_path_factory.mktemp("pipeline") / "tiny"
-    generate_sequence(get_scenario("tiny"), folder)
-    return open_synthetic(folder)
 
 
 @pytest.fixture(scope="module")

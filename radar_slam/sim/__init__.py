@@ -7,7 +7,7 @@ Modules, in pipeline order:
     sensor.py     scan geometry and timing (CIR204-H by default)
     physics.py    every physical effect as a named, configurable dataclass
     render.py     vectorised rendering of one polar scan
-    scenarios.py  named scenarios: tiny, loop, reverse, multisession_a/_b, long
+    scenarios.py  named scenarios: tiny, tiny_loop, loop, reverse, multisession_a/_b, long
     generate.py   build a scene and write a sequence
     writer.py     the files (polar PNGs, global_pose.csv, stamps, world.json, marker)
     figure.py     overview figure (matplotlib)

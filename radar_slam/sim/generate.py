@@ -34,8 +34,9 @@ from radar_slam.sim.writer import (
 
 logger = logging.getLogger(__name__)
 
-SIM_VERSION = "1.1"
-"""Bump when the output for a given scenario and seed changes (regenerates cached sequences)."""
+SIM_VERSION = "1.2"
+"""Bump when the output for a given scenario and seed changes (regenerates cached sequences).
+1.2: `reverse` became a figure-eight driven both ways (the other scenarios are unchanged)."""
 GT_PERIOD_NS = 10_000_000
 """global_pose.csv is sampled at 100 Hz, plus a row at every scan time [ns]."""
 ROUTE_STREAM, FRAME_STREAM = 2, 3

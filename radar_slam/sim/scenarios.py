@@ -6,8 +6,9 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 | scenario | what | scans | route |
 | --- | --- | --- | --- |
 | tiny | 3 x 3 blocks, 1024 bins (61 m): unit tests | 60 | 130 m |
+| tiny_loop | a small loop with a revisit, reduced bins (tiny's town), for CI | 177 | 330 m |
 | loop | a two-block loop driven twice, same direction (the default) | 557 | 1.35 km |
-| reverse | streets driven out and back the opposite way, lanes 3.5 m apart | 562 | 1.4 km |
+| reverse | a figure-eight driven, then again the opposite way, lanes 3.5 m apart | 617 | 1.3 km |
 | multisession_a | session A of a town shared with multisession_b | 351 | 0.9 km |
 | multisession_b | another route sharing streets; cars, vegetation, traffic changed | 522 | 1.2 km |
 | long | three loops, revisits in both directions: benchmarks | 1588 | 4.2 km |
@@ -32,7 +33,10 @@ DAY_NS = 86_400 * 1_000_000_000
 MULRAN_LIKE_ORIGIN = (353_000.0, 4_026_000.0)
 """Offset added to the town frame in global_pose.csv (UTM-like metres, as MulRan's KAIST)."""
 TINY_BINS = 1024
-"""Range bins of the `tiny` scenario (61 m at the CIR204-H bin size)."""
+"""Range bins of the `tiny` and `tiny_loop` scenarios (61 m at the CIR204-H bin size)."""
+_TINY_SENSOR = SensorConfig(n_bins=TINY_BINS)
+_TINY_TOWN = TownConfig(n_blocks=(3, 3), block_size_m=(60.0, 90.0))
+"""Sensor and town of the `tiny` and `tiny_loop` scenarios."""
 
 
 @dataclass(frozen=True)
@@ -81,18 +85,34 @@ _LOOP_ROUTE: Waypoints = (
     (2, 2),
     (3, 2),
 )
+_TINY_LOOP_ROUTE: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2), (1, 1), (2, 1), (2, 2))
+"""Around one block of the tiny town and on along one and a half of its streets again."""
+_REVERSE_CROSSING = (5, 2)
+"""Where the figure-eight of `reverse` crosses itself (lattice node)."""
 _REVERSE_ROUTE: Waypoints = (
-    (1, 1),
-    (4, 1),
-    (4, 3),
+    # Lap 1: the block on the crossing's (+i, +j) side anticlockwise, straight over the
+    # crossing, the block on its (-i, -j) side clockwise.
+    _REVERSE_CROSSING,
+    (6, 2),
+    (6, 3),
     (5, 3),
-    (5, 4),
-    (4, 4),
-    (4, 3),
+    (5, 1),
     (4, 1),
-    (1, 1),
-    (1, 2),
+    (4, 2),
+    _REVERSE_CROSSING,
+    # Lap 2 (a left turn at the crossing): the same figure-eight in the opposite direction.
+    (5, 3),
+    (6, 3),
+    (6, 2),
+    (4, 2),
+    (4, 1),
+    (5, 1),
+    _REVERSE_CROSSING,
 )
+"""A closed circuit (a figure-eight over two diagonal blocks) driven once, then again in the
+opposite direction: every street of it is revisited the other way, in the other lane. The
+crossing turns the route around with an ordinary turn (no U-turn), and every corner is driven
+once as a left and once as a right turn."""
 _MULTI_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (2, 1))
 _MULTI_B: Waypoints = (
     (4, 4),
@@ -137,8 +157,18 @@ SCENARIOS: dict[str, Scenario] = {
             town_routes=(_TINY_ROUTE,),
             max_frames=60,
             start_ns=EPOCH_NS + 1 * DAY_NS,
-            sensor=SensorConfig(n_bins=TINY_BINS),
-            town=TownConfig(n_blocks=(3, 3), block_size_m=(60.0, 90.0)),
+            sensor=_TINY_SENSOR,
+            town=_TINY_TOWN,
+        ),
+        Scenario(
+            name="tiny_loop",
+            description="a small loop with a revisit, reduced bins (1024, 61 m): for CI",
+            seed=11,
+            waypoints=_TINY_LOOP_ROUTE,
+            town_routes=(_TINY_LOOP_ROUTE,),
+            start_ns=EPOCH_NS + 1 * DAY_NS,
+            sensor=_TINY_SENSOR,
+            town=_TINY_TOWN,
         ),
         Scenario(
             name="loop",
@@ -150,7 +180,8 @@ SCENARIOS: dict[str, Scenario] = {
         ),
         Scenario(
             name="reverse",
-            description="streets driven out and back in the opposite direction, 3.5 m lane offset",
+            description="a figure-eight driven once, then again in the opposite direction in the "
+            "other lane (3.5 m offset)",
             seed=5,
             waypoints=_REVERSE_ROUTE,
             town_routes=(_REVERSE_ROUTE,),

@@ -115,8 +115,12 @@ def resolve_synthetic(root: Path, name: str) -> Path:
     return folder
 
 
-def open_synthetic(folder: Path) -> Sequence:
-    """Open a simulated sequence with the MulRan loader (bin count and size from world.json)."""
+def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Sequence:
+    """Open a simulated sequence with the MulRan loader (bin count and size from world.json).
+
+    `range_resolution_m` overrides the simulated bin size (the `dataset:` config section), e.g.
+    to study a mis-calibrated range resolution.
+    """
     from radar_slam.sim.writer import WORLD_FILE, read_json
 
     folder = Path(folder)
@@ -133,6 +137,8 @@ def open_synthetic(folder: Path) -> Sequence:
             "n_bins": int(sensor["n_bins"]),
             "range_resolution_m": float(sensor["range_resolution_m"]),
         }
+    if range_resolution_m is not None:
+        kwargs["range_resolution_m"] = range_resolution_m
     return MulRanSequence(folder, family=SYNTHETIC_FAMILY, **kwargs)
 
 

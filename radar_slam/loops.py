@@ -12,7 +12,7 @@ scan) the `LoopDetector`
       along theta with both pi hypotheses, translation by robust least squares of the per-angle
       shifts), moved from the scans' mean acquisition times to their reference times
       (`motion_compensated`: without it, scans driven in opposite directions disagree by about
-      speed x sweep, 2.5-3.7 m on synthetic/reverse); rejected when the aligned correlation,
+      speed x sweep, 2.5-3.7 m on a reverse revisit); rejected when the aligned correlation,
       the inlier fraction or the translation is implausible;
    b. refinement by phase correlation (`odometry.registration`): the map scan is first turned by
       the sinogram rotation (an azimuth offset: no resampling), so phase correlation only has to
@@ -34,11 +34,11 @@ the first true loop lies far outside any chi-square gate of the current estimate
 graph's engineer: d^2 = 14.6 for a moderate, 73 for a strong drift versus 11.3 at 99 %), whereas
 the odometry between two nearby loops drifts little, so the cycle test is tight for wrong loops
 and loose for none, and it does not depend on how well the odometry's covariance is calibrated
-(measured on synthetic/loop and /reverse: the odometry factors' squared Mahalanobis errors
-average 8-11 instead of 3, and the graph d^2 of our first loops was 4.7-5.0, under the gate there
-only because the chained odometry covariance is loose). With 2 % drift per metre and a 60 m
-window, random false loops (30 % of all) never formed a consistent pair in 12 simulated trials
-(5 %: 8 pairs). The graph's robust kernel and its final GNC pass handle what slips through.
+(an early odometry version's factors had squared Mahalanobis errors of 8-11 instead of 3; after
+its recalibration they average about 2.7, but a real sensor will not be calibrated as well as the
+simulator). With 2 % drift per metre and a 60 m window, random false loops (30 % of all) never
+formed a consistent pair in 12 simulated trials (5 %: 8 pairs). The graph's robust kernel and its
+final GNC pass handle what slips through.
 
 Every verified proposal becomes a `LoopDecision` with its reason, accepted or not. Measurements
 follow the graph convention: a loop (i = query, j = match) measures T_i^-1 T_j, the match scan's

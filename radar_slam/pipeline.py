@@ -11,9 +11,9 @@ odometry's motion and covariance (a constant-velocity gap keeps its large covari
 reproduces the odometry poses exactly, so without loops SLAM equals odometry, and the graph.g2o
 written from it is read back with the same meaning (g2o edges between consecutive vertices are
 odometry). Tying each scan to its keyframe instead (a tree) was measured too: the same accuracy
-within noise (synthetic/loop ATE 0.367 vs 0.357 m, reverse 1.81 vs 2.04 m), but g2o readers would
-take its keyframe edges for loops. Loop factors join scans that entered the loop detector's
-database (every `query_spacing_m`).
+within noise (simulator 1.1, an earlier odometry: synthetic/loop ATE 0.367 vs 0.357 m), but g2o
+readers would take its keyframe edges for loops. Loop factors join scans that entered the loop
+detector's database (every `query_spacing_m`).
 
 ISAM2 is updated whenever loops are added (so later loops are checked and initial guesses are
 made against the corrected estimate) and once at the end; a final batch pass (GNC by default)

@@ -48,28 +48,36 @@ def read_yaml(path: Path) -> dict[str, Any]:
     return data
 
 
-def merge(cls: type[T], base: T, overrides: dict[str, Any], where: str) -> T:
+def merge(
+    cls: type[T], base: T, overrides: dict[str, Any], where: str, keys: tuple[str, ...] = ()
+) -> T:
     """Return `base` with `overrides` applied, recursively for nested dataclasses.
 
-    Raises ConfigError for keys that `cls` does not have or values of the wrong type;
-    `where` names the source (a file path and key prefix) in the message.
+    Raises ConfigError for keys that `cls` does not have or values of the wrong type; the
+    message names the source `where` (a file path) and the key path, e.g.
+    "my.yaml: odometry.keyframe: unknown key 'max_distanc'".
     """
     if not isinstance(overrides, dict):
-        raise ConfigError(f"{where}: expected a mapping, got {type(overrides).__name__}")
+        raise ConfigError(f"{_at(where, keys)}: expected a mapping, got {type(overrides).__name__}")
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     hints = typing.get_type_hints(cls, globalns=vars(sys.modules[cls.__module__]))
     changes: dict[str, Any] = {}
     for key, value in overrides.items():
         if key not in fields:
             known = ", ".join(sorted(fields))
-            raise ConfigError(f"{where}: unknown key {key!r} (known: {known})")
+            raise ConfigError(f"{_at(where, keys)}: unknown key {key!r} (known: {known})")
         hint = hints[key]
         current = getattr(base, key)
         if dataclasses.is_dataclass(hint):
-            changes[key] = merge(hint, current, value, f"{where}.{key}")  # type: ignore[arg-type]
+            changes[key] = merge(hint, current, value, where, (*keys, key))  # type: ignore[arg-type]
         else:
-            changes[key] = _coerce(value, hint, f"{where}.{key}")
+            changes[key] = _coerce(value, hint, _at(where, (*keys, key)))
     return dataclasses.replace(base, **changes)  # type: ignore[type-var]
+
+
+def _at(where: str, keys: tuple[str, ...]) -> str:
+    """`where` followed by the dotted key path, for error messages."""
+    return f"{where}: {'.'.join(keys)}" if keys else where
 
 
 def _coerce(value: Any, hint: Any, where: str) -> Any:

@@ -111,6 +111,7 @@ def open_configured(
     configuration's `dataset` section changes loader settings, the sequence is opened again
     with them (opening is lazy: no scan is read).
     """
+    load_config(None, path)  # a mistake in the user's file fails before any data is generated
     sequence = open_sequence(spec, data_root)
     config = load_config(sequence.family, path)
     if config.dataset.loader_options():

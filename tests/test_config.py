@@ -38,9 +38,9 @@ def test_override_nested_and_coerce(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("inner:\n  sigmaa: 1\n", "unknown key 'sigmaa'"),
+        ("inner:\n  sigmaa: 1\n", "bad.yaml: inner: unknown key 'sigmaa'"),
         ("framez: 1\n", "unknown key 'framez'"),
-        ("frames: abc\n", "expected an integer"),
+        ("frames: abc\n", "bad.yaml: frames: expected an integer"),
         ("inner:\n  kernel: tukey\n", "not one of"),
         ("inner: 3\n", "expected a mapping"),
         ("- a\n- b\n", "must be a mapping"),

@@ -141,3 +141,15 @@ def test_pipeline_config_dataset_section(tmp_path: Path, oxford_dir: Path) -> No
     user.write_text("dataset:\n  range_resolution: 0.0432\n")
     with pytest.raises(ConfigError, match="unknown key 'range_resolution'"):
         open_configured(str(oxford_dir), path=user)
+
+
+def test_bad_user_config_fails_before_any_data_is_generated(tmp_path: Path) -> None:
+    """A typo in --config is reported at once, not after simulating a sequence."""
+    from radar_slam.errors import ConfigError
+    from radar_slam.pipeline import open_configured
+
+    user = tmp_path / "typo.yaml"
+    user.write_text("odometry:\n  keyframe:\n    max_distanc: 3\n")
+    with pytest.raises(ConfigError, match="typo.yaml: odometry.keyframe: unknown key"):
+        open_configured("synthetic/tiny", data_root=tmp_path / "root", path=user)
+    assert not (tmp_path / "root").exists()

@@ -64,6 +64,7 @@ from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.registration import PreparedScan, prepare, register
 from odometry.scan import Scan
 from odometry.se2 import between, compose, wrap_angle
+from radar_slam.datasets.frame import RadarFrame
 from radar_slam.errors import RadarSlamError
 from radar_slam.graph import LoopConstraint
 from raplace.config import RaPlaceConfig
@@ -461,23 +462,10 @@ def is_true_loop(
 # --------------------------------------------------------------------------- verification
 
 
-@dataclass(frozen=True)
-class _TurnedScan:
-    """A scan expressed in a frame turned by `turn_rad` from its own (azimuths offset): the
-    Scan protocol's attributes."""
-
-    timestamp_ns: int
-    polar: NDArray[np.uint8]
-    azimuths_rad: NDArray[np.float64]
-    range_resolution_m: float
-    sensor: str
-    azimuth_times_ns: NDArray[np.int64] | None
-
-
-def turned(scan: Scan, turn_rad: float) -> _TurnedScan:
+def turned(scan: Scan, turn_rad: float) -> RadarFrame:
     """`scan` seen from a frame whose x axis is turned by -`turn_rad` from the scan's: a point at
-    azimuth a in the scan's frame lies at a + turn_rad in the new one."""
-    return _TurnedScan(
+    azimuth a in the scan's frame lies at a + turn_rad in the new one (azimuths offset)."""
+    return RadarFrame(
         timestamp_ns=int(scan.timestamp_ns),
         polar=scan.polar,
         azimuths_rad=np.asarray(scan.azimuths_rad, dtype=np.float64) + turn_rad,

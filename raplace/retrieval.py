@@ -7,15 +7,18 @@ re-scored at full resolution: a handful of batched FFTs and einsums per query, n
 the database.
 
 The pieces shared with the Scan Context baseline (`Candidate`, `GrowingArray`,
-`candidate_mask`, the .npz layout) live here too.
+`candidate_mask`, `KeyframeIndex`, the .npz layout with `save_database` / `load_database`) live
+here too.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol, TypeVar
 
 import numpy as np
 import scipy.fft
@@ -27,6 +30,9 @@ from raplace.descriptor import coarse_descriptor
 from raplace.scoring import score, theta_spectrum
 
 log = logging.getLogger(__name__)
+
+ConfigT = TypeVar("ConfigT")
+DatabaseT = TypeVar("DatabaseT", bound="BatchDatabase")
 
 INITIAL_CAPACITY = 64
 """Rows allocated by an empty GrowingArray; capacity doubles when full."""
@@ -129,7 +135,7 @@ def neighbourhood(indices: NDArray[np.int64], radius: int, n_entries: int) -> ND
 def save_npz(path: Path, method: str, config: object, arrays: dict[str, NDArray]) -> None:
     """Write a recognizer database: its arrays plus method name, config and format version."""
     meta = {"method": method, "version": FILE_FORMAT_VERSION, "config": to_dict(config)}
-    np.savez(Path(path), meta=np.array(json.dumps(meta)), **arrays)
+    np.savez(Path(path), allow_pickle=False, meta=np.array(json.dumps(meta)), **arrays)
 
 
 def load_npz(path: Path, method: str) -> tuple[dict, dict[str, NDArray]]:
@@ -150,6 +156,107 @@ def load_npz(path: Path, method: str) -> tuple[dict, dict[str, NDArray]]:
     return meta["config"], arrays
 
 
+class BatchDatabase(Protocol):
+    """What `load_database` needs of a recognizer: batch insertion."""
+
+    def add_batch(
+        self, descriptors: NDArray, keys: NDArray, times_s: NDArray[np.float64] | None = None
+    ) -> None: ...
+
+
+def entry_times(times_s: NDArray[np.float64] | None, keys: NDArray[np.int64]) -> NDArray:
+    """(n,) float64 times [s] of n new entries with (n,) `keys`: NaN (unknown) when None."""
+    times = np.full(len(keys), np.nan) if times_s is None else np.asarray(times_s, float)
+    if times.shape != keys.shape:
+        raise RaPlaceError(f"times shape {times.shape} != keys shape {keys.shape}")
+    return times
+
+
+class KeyframeIndex:
+    """Keys and times [s] of a place database's entries, in insertion order.
+
+    The bookkeeping both recognizers share: the exclusion window over the stored times and the
+    ranking of scored entries into `Candidate`s.
+    """
+
+    def __init__(self) -> None:
+        self._keys = GrowingArray((), np.int64)
+        self._times = GrowingArray((), np.float64)
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+    @property
+    def keys(self) -> NDArray[np.int64]:
+        """(n_entries,) keys (a view, invalidated by the next `extend`)."""
+        return self._keys.values
+
+    @property
+    def times_s(self) -> NDArray[np.float64]:
+        """(n_entries,) times [s], NaN when unknown (a view, invalidated by the next `extend`)."""
+        return self._times.values
+
+    def extend(self, keys: NDArray[np.int64], times_s: NDArray[np.float64]) -> None:
+        """Append (n,) keys and their (n,) times [s] (see `entry_times`)."""
+        self._keys.extend(keys)
+        self._times.extend(times_s)
+
+    def allowed(self, time_s: float | None, exclusion: ExclusionConfig) -> NDArray[np.int64]:
+        """Sorted indices of the entries a query at `time_s` may match (see `candidate_mask`)."""
+        return np.flatnonzero(candidate_mask(self._times.values, time_s, exclusion))
+
+    def ranked(
+        self,
+        indices: NDArray[np.int64],
+        distance: NDArray[np.float64],
+        yaw_rad: NDArray[np.float64],
+        k: int,
+        yaw_period_rad: float,
+    ) -> list[Candidate]:
+        """The k scored entries of least distance, best first (ties keep the given order).
+
+        Args:
+            indices: (m,) insertion indices of the scored entries.
+            distance: (m,) their distances; yaw_rad: (m,) their yaws in the query frame [rad].
+            yaw_period_rad: the period the yaws are known modulo [rad].
+        """
+        order = np.argsort(distance, kind="stable")[: max(0, k)]
+        keys = self._keys.values
+        return [
+            Candidate(
+                key=int(keys[indices[i]]),
+                index=int(indices[i]),
+                distance=float(distance[i]),
+                yaw_rad=float(yaw_rad[i]),
+                yaw_period_rad=float(yaw_period_rad),
+            )
+            for i in order
+        ]
+
+
+def save_database(
+    path: Path, method: str, config: object, descriptors: NDArray, index: KeyframeIndex
+) -> None:
+    """Write a recognizer's (n, ...) descriptors with the keys and times of `index`."""
+    arrays = {"descriptors": descriptors, "keys": index.keys, "times_s": index.times_s}
+    save_npz(path, method, config, arrays)
+
+
+def load_database(
+    path: Path,
+    method: str,
+    factory: Callable[[ConfigT], DatabaseT],
+    config_type: type[ConfigT],
+    cfg: ConfigT | None,
+) -> DatabaseT:
+    """Read a file written by `save_database` into `factory(cfg or the stored config)`."""
+    stored, arrays = load_npz(path, method)
+    database = factory(cfg if cfg is not None else from_dict(config_type, stored))
+    if len(arrays["keys"]):
+        database.add_batch(arrays["descriptors"], arrays["keys"], arrays["times_s"])
+    return database
+
+
 class PlaceRecognizer:
     """RaPlace keyframe database: add descriptors, query the best matching places.
 
@@ -161,19 +268,18 @@ class PlaceRecognizer:
 
     def __init__(self, cfg: RetrievalConfig) -> None:
         self.cfg = cfg
-        self._keys = GrowingArray((), np.int64)
-        self._times = GrowingArray((), np.float64)
+        self._index = KeyframeIndex()
         self._full: GrowingArray | None = None  # (n, n_theta // 2 + 1, n_freq) complex64
         self._coarse: GrowingArray | None = None  # same for the coarse descriptors
         self._shape: tuple[int, int] | None = None
 
     def __len__(self) -> int:
-        return len(self._keys)
+        return len(self._index)
 
     @property
     def keys(self) -> NDArray[np.int64]:
         """(n_entries,) keys in insertion order."""
-        return self._keys.values.copy()
+        return self._index.keys.copy()
 
     @property
     def descriptor_shape(self) -> tuple[int, int] | None:
@@ -212,14 +318,11 @@ class PlaceRecognizer:
             self._init_storage(shape)
         elif shape != self._shape:
             raise RaPlaceError(f"descriptor shape {shape} != database shape {self._shape}")
-        times = np.full(len(keys), np.nan) if times_s is None else np.asarray(times_s, float)
-        if times.shape != keys.shape:
-            raise RaPlaceError(f"times shape {times.shape} != keys shape {keys.shape}")
+        times = entry_times(times_s, keys)
         assert self._full is not None and self._coarse is not None
         self._full.extend(theta_spectrum(descriptors))
         self._coarse.extend(theta_spectrum(self._coarse_of(descriptors)))
-        self._keys.extend(keys)
-        self._times.extend(times)
+        self._index.extend(keys, times)
 
     def _init_storage(self, shape: tuple[int, int]) -> None:
         n_theta, n_freq = shape
@@ -257,24 +360,13 @@ class PlaceRecognizer:
         descriptor = np.asarray(descriptor, dtype=np.float32)
         if descriptor.shape != self._shape:
             raise RaPlaceError(f"query shape {descriptor.shape} != database shape {self._shape}")
-        allowed = np.flatnonzero(candidate_mask(self._times.values, time_s, self.cfg.exclusion))
+        allowed = self._index.allowed(time_s, self.cfg.exclusion)
         if len(allowed) == 0:
             return []
         subset = self._shortlist(descriptor, allowed)
         assert self._full is not None
         distance, yaw = score(descriptor, self._full.values[subset])
-        order = np.argsort(distance, kind="stable")[: max(0, k)]
-        keys = self._keys.values
-        return [
-            Candidate(
-                key=int(keys[subset[i]]),
-                index=int(subset[i]),
-                distance=float(distance[i]),
-                yaw_rad=float(yaw[i]),
-                yaw_period_rad=float(np.pi),
-            )
-            for i in order
-        ]
+        return self._index.ranked(subset, distance, yaw, k, yaw_period_rad=np.pi)
 
     def _shortlist(self, descriptor: NDArray[np.float32], allowed: NDArray[np.int64]) -> NDArray:
         """Entries scored at full resolution: all allowed, or the coarse winners' neighbours."""
@@ -303,23 +395,11 @@ class PlaceRecognizer:
 
     def save(self, path: Path) -> None:
         """Write the database (descriptors, keys, times, config) to an .npz file."""
-        save_npz(
-            path,
-            self.method,
-            self.cfg,
-            {
-                "descriptors": self.descriptors(),
-                "keys": self._keys.values,
-                "times_s": self._times.values,
-            },
-        )
+        save_database(path, self.method, self.cfg, self.descriptors(), self._index)
 
     @classmethod
     def load(cls, path: Path, cfg: RetrievalConfig | None = None) -> PlaceRecognizer:
         """Read a database written by `save`; `cfg` overrides the stored retrieval settings."""
-        stored, arrays = load_npz(path, cls.method)
-        recognizer = cls(cfg if cfg is not None else from_dict(RetrievalConfig, stored))
-        if len(arrays["keys"]):
-            recognizer.add_batch(arrays["descriptors"], arrays["keys"], arrays["times_s"])
+        recognizer = load_database(path, cls.method, cls, RetrievalConfig, cfg)
         log.debug("loaded %d RaPlace keyframes from %s", len(recognizer), path)
         return recognizer

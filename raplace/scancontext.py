@@ -22,9 +22,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from raplace import RaPlaceError
-from raplace.config import ScanContextConfig, from_dict
+from raplace.config import ScanContextConfig
 from raplace.preprocess import resample_range, suppress_noise
-from raplace.retrieval import Candidate, GrowingArray, candidate_mask, load_npz, save_npz
+from raplace.retrieval import (
+    Candidate,
+    GrowingArray,
+    KeyframeIndex,
+    entry_times,
+    load_database,
+    save_database,
+)
 
 log = logging.getLogger(__name__)
 
@@ -136,16 +143,15 @@ class ScanContextRecognizer:
         shape = (cfg.n_rings, cfg.n_sectors)
         self._contexts = GrowingArray(shape, np.float32)
         self._ring_keys = GrowingArray((cfg.n_rings,), np.float32)
-        self._keys = GrowingArray((), np.int64)
-        self._times = GrowingArray((), np.float64)
+        self._index = KeyframeIndex()
 
     def __len__(self) -> int:
-        return len(self._keys)
+        return len(self._index)
 
     @property
     def keys(self) -> NDArray[np.int64]:
         """(n_entries,) keys in insertion order."""
-        return self._keys.values.copy()
+        return self._index.keys.copy()
 
     @property
     def descriptor_shape(self) -> tuple[int, int]:
@@ -167,11 +173,10 @@ class ScanContextRecognizer:
                 f"need (n, {self.cfg.n_rings}, {self.cfg.n_sectors}) contexts and n keys, got "
                 f"{descriptors.shape} and {keys.shape}"
             )
-        times = np.full(len(keys), np.nan) if times_s is None else np.asarray(times_s, float)
+        times = entry_times(times_s, keys)
         self._contexts.extend(descriptors)
         self._ring_keys.extend(ring_key(descriptors))
-        self._keys.extend(keys)
-        self._times.extend(times)
+        self._index.extend(keys, times)
 
     def query(
         self, descriptor: NDArray, k: int = 1, time_s: float | None = None
@@ -180,25 +185,14 @@ class ScanContextRecognizer:
         descriptor = np.asarray(descriptor, dtype=np.float32)
         if descriptor.shape != self.descriptor_shape:
             raise RaPlaceError(f"query shape {descriptor.shape} != {self.descriptor_shape}")
-        allowed = np.flatnonzero(candidate_mask(self._times.values, time_s, self.cfg.exclusion))
+        allowed = self._index.allowed(time_s, self.cfg.exclusion)
         if len(allowed) == 0:
             return []
         gaps = np.sum((self._ring_keys.values[allowed] - ring_key(descriptor)) ** 2, axis=1)
         n_short = min(len(allowed), max(self.cfg.n_candidates, k))
         shortlist = allowed[np.argpartition(gaps, n_short - 1)[:n_short]]
         distance, yaw = column_shift_distance(descriptor, self._contexts.values[shortlist])
-        order = np.argsort(distance, kind="stable")[: max(0, k)]
-        keys = self._keys.values
-        return [
-            Candidate(
-                key=int(keys[shortlist[i]]),
-                index=int(shortlist[i]),
-                distance=float(distance[i]),
-                yaw_rad=float(yaw[i]),
-                yaw_period_rad=float(TWO_PI),
-            )
-            for i in order
-        ]
+        return self._index.ranked(shortlist, distance, yaw, k, yaw_period_rad=TWO_PI)
 
     def is_loop(self, candidate: Candidate) -> bool:
         """True when the candidate's distance is below the configured loop threshold."""
@@ -206,23 +200,11 @@ class ScanContextRecognizer:
 
     def save(self, path: Path) -> None:
         """Write the database (contexts, keys, times, config) to an .npz file."""
-        save_npz(
-            path,
-            self.method,
-            self.cfg,
-            {
-                "descriptors": self._contexts.values,
-                "keys": self._keys.values,
-                "times_s": self._times.values,
-            },
-        )
+        save_database(path, self.method, self.cfg, self._contexts.values, self._index)
 
     @classmethod
     def load(cls, path: Path, cfg: ScanContextConfig | None = None) -> ScanContextRecognizer:
         """Read a database written by `save`; `cfg` overrides the stored settings."""
-        stored, arrays = load_npz(path, cls.method)
-        recognizer = cls(cfg if cfg is not None else from_dict(ScanContextConfig, stored))
-        if len(arrays["keys"]):
-            recognizer.add_batch(arrays["descriptors"], arrays["keys"], arrays["times_s"])
+        recognizer = load_database(path, cls.method, cls, ScanContextConfig, cfg)
         log.debug("loaded %d Scan Context keyframes from %s", len(recognizer), path)
         return recognizer

@@ -24,7 +24,6 @@ import argparse
 import logging
 import os
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -34,7 +33,7 @@ from numpy.typing import NDArray
 from odometry.deskew import motion_from_twist
 from odometry.odometry import Odometry, OdometryResult
 from odometry.se2 import between, compose, wrap_angle
-from radar_slam.datasets import open_sequence
+from radar_slam.datasets import RadarFrame, open_sequence
 from radar_slam.metrics import evaluate
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory
@@ -56,18 +55,6 @@ DEFAULT_SCAN = (
 )
 SYNTHETIC_POINTS = 3000
 SYNTHETIC_SEED = 7
-
-
-@dataclass(frozen=True)
-class BenchFrame:
-    """A scan with the attributes of `odometry.scan.Scan`."""
-
-    timestamp_ns: int
-    polar: NDArray[np.uint8]
-    azimuths_rad: NDArray[np.float64]
-    range_resolution_m: float
-    sensor: str
-    azimuth_times_ns: NDArray[np.int64] | None
 
 
 def mulran_azimuths() -> NDArray[np.float64]:
@@ -99,7 +86,7 @@ def render_frame(
     pose: NDArray[np.float64],
     twist: NDArray[np.float64],
     timestamp_ns: int,
-) -> BenchFrame:
+) -> RadarFrame:
     """The world scan as measured from `pose` (at mid-sweep) while moving at `twist`."""
     n_az, n_bins = world.shape
     tau = (np.arange(n_az) - 0.5 * (n_az - 1)) * (SWEEP_S / n_az)
@@ -112,7 +99,7 @@ def render_frame(
     y = s * xs + c * ys + poses[:, 1:2]
     bins, rows = polar_sample_coords(x, y, azimuths, MULRAN_RANGE_RESOLUTION_M)
     polar = np.clip(np.rint(remap(world, bins, rows)), 0, 255).astype(np.uint8)
-    return BenchFrame(
+    return RadarFrame(
         timestamp_ns=timestamp_ns,
         polar=polar,
         azimuths_rad=azimuths,

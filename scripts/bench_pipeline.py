@@ -21,109 +21,22 @@ import json
 import logging
 import os
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
 
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import Sequence
-from radar_slam.loops import GeometricVerifier, KeyScan, LoopDetector, Verification, Verifier
+from radar_slam.false_loops import FalseLoopInjection
+from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
-from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.retrieval import PlaceRecognizer
 
 logger = logging.getLogger("bench_pipeline")
 
 DEFAULT_SEQUENCES = ("synthetic/loop",)
-FALSE_MIN_DISTANCE_M = 50.0
-"""An injected candidate lies at least this far from the query (ground truth) [m]."""
-FAKE_OFFSET_M = 3.0
-"""An injected loop claims the match within this of the query [m] (uniform per axis)."""
-FAKE_OFFSET_DEG = 10.0
-"""... and rotated by at most this [deg]."""
-FAKE_SIGMA_XY_M = 0.1
-FAKE_SIGMA_YAW_DEG = 0.2
-"""Covariance given to an injected loop (as confident as a good real one)."""
 INJECTION_SEED = 1
-
-
-@dataclass
-class Injection:
-    """Shared state of the injecting recognizer and verifier.
-
-    Attributes:
-        ground_truth: (N, 3) poses of the scans (to tell false candidates from true ones).
-        fraction: fraction of the queries given an injected candidate.
-        rng: random source.
-        injected_key: the candidate injected into the current query (None: none).
-        passed: (query, match) keys of the false loops the fake verifier passed.
-    """
-
-    ground_truth: NDArray[np.float64]
-    fraction: float
-    rng: np.random.Generator
-    injected_key: int | None = None
-    passed: set[tuple[int, int]] = field(default_factory=set)
-
-
-class InjectingRecognizer:
-    """A RaPlace database that puts a random database entry first on a fraction of queries."""
-
-    def __init__(self, inner: PlaceRecognizer, injection: Injection) -> None:
-        self.inner = inner
-        self.injection = injection
-        self.keys: list[int] = []
-
-    def add(self, descriptor: NDArray, key: int, time_s: float | None = None) -> None:
-        self.inner.add(descriptor, key, time_s)
-        self.keys.append(key)
-
-    def query(
-        self, descriptor: NDArray, k: int = 1, time_s: float | None = None
-    ) -> list[Candidate]:
-        found = self.inner.query(descriptor, k, time_s)
-        inj = self.injection
-        inj.injected_key = None
-        if not self.keys or inj.rng.random() >= inj.fraction:
-            return found
-        index = int(inj.rng.integers(len(self.keys)))
-        inj.injected_key = self.keys[index]
-        others = [c for c in found if c.key != inj.injected_key]
-        return [Candidate(inj.injected_key, index, 0.0, 0.0, np.pi), *others]
-
-
-class InjectingVerifier:
-    """Passes an injected candidate far from the query with a fake measurement (a false loop),
-    ignores one near it (so the injection adds false loops and nothing else), and verifies the
-    real candidates for real."""
-
-    def __init__(self, inner: Verifier, injection: Injection) -> None:
-        self.inner = inner
-        self.injection = injection
-
-    def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
-        inj = self.injection
-        if match.key != inj.injected_key:
-            return self.inner(query, match)
-        gt = inj.ground_truth
-        if np.hypot(*(gt[match.key, :2] - gt[query.key, :2])) <= FALSE_MIN_DISTANCE_M:
-            nan = np.full(3, np.nan)
-            return Verification(
-                False, "injected near the query", nan, np.full((3, 3), np.nan), nan, 0.0
-            )
-        inj.passed.add((query.key, match.key))
-        offset = np.array(
-            [
-                inj.rng.uniform(-FAKE_OFFSET_M, FAKE_OFFSET_M),
-                inj.rng.uniform(-FAKE_OFFSET_M, FAKE_OFFSET_M),
-                np.deg2rad(inj.rng.uniform(-FAKE_OFFSET_DEG, FAKE_OFFSET_DEG)),
-            ]
-        )
-        sigma_yaw = np.deg2rad(FAKE_SIGMA_YAW_DEG)
-        covariance = np.diag([FAKE_SIGMA_XY_M**2, FAKE_SIGMA_XY_M**2, sigma_yaw**2])
-        return Verification(True, "", offset, covariance, offset, 1.0, 100.0)
 
 
 def run_once(
@@ -136,10 +49,11 @@ def run_once(
         gt = sequence.ground_truth
         if gt is None:
             raise SystemExit("--inject-false needs a sequence with ground truth")
-        injection = Injection(np.asarray(gt), inject, np.random.default_rng(INJECTION_SEED))
+        rng = np.random.default_rng(INJECTION_SEED)
+        injection = FalseLoopInjection(np.asarray(gt), inject, rng)
         cfg = config.loop_closure
-        recognizer = InjectingRecognizer(PlaceRecognizer(cfg.raplace.retrieval), injection)
-        verifier = InjectingVerifier(GeometricVerifier(cfg), injection)
+        recognizer = injection.recognizer(PlaceRecognizer(cfg.raplace.retrieval))
+        verifier = injection.verifier(GeometricVerifier(cfg))
         detector = LoopDetector(
             cfg, scan_loader=lambda k: sequence[k], recognizer=recognizer, verifier=verifier
         )

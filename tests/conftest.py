@@ -6,7 +6,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
+from numpy.typing import NDArray
+from raplace_scenes import oxford_scans
 
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import Sequence
@@ -38,6 +41,30 @@ def oxford_dir() -> Path:
 def mulran_raw_dir() -> Path:
     """One real MulRan scan: raw CSV and the polar PNG."""
     return _require(MULRAN_RAW)
+
+
+@pytest.fixture(scope="module")
+def oxford_polar_scans(
+    oxford_dir: Path,
+) -> list[tuple[NDArray[np.uint8], NDArray[np.float64], float]]:
+    """(polar, CCW azimuths [rad], range resolution [m]) of every partial Oxford scan, read
+    once per test module (see `raplace_scenes.oxford_scans`)."""
+    return oxford_scans(oxford_dir)
+
+
+@pytest.fixture(scope="session")
+def metric_keys() -> frozenset[str]:
+    """The keys of a flat metrics record (`TrajectoryMetrics.to_dict`, `radar-slam eval --json`)."""
+    return frozenset(
+        {
+            "ate_rmse_m",
+            "ate_origin_rmse_m",
+            "rpe_trans_rmse_m",
+            "drift_trans_pct",
+            "drift_rot_deg_per_100m",
+            "poses_matched",
+        }
+    )
 
 
 @pytest.fixture(scope="session")

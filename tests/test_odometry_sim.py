@@ -10,7 +10,6 @@ velocity, which `estimate_motion` has to estimate and undo). Drift: the first sc
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ from numpy.typing import NDArray
 from odometry import OdometryConfig, estimate_motion, se2
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry
+from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.synthetic import open_synthetic
 from radar_slam.metrics import kitti_drift
 from radar_slam.sim.generate import Scene, build_scene, generate_sequence, make_renderer
@@ -47,18 +47,6 @@ NEES_RANGE = (1.0, 6.0)
 de-skew that is off or referred to the end of the sweep)."""
 
 
-@dataclass(frozen=True)
-class SimScan:
-    """A rendered scan with the attributes of `odometry.Scan`."""
-
-    timestamp_ns: int
-    polar: NDArray[np.uint8]
-    azimuths_rad: NDArray[np.float64]
-    range_resolution_m: float
-    sensor: str
-    azimuth_times_ns: NDArray[np.int64] | None
-
-
 @pytest.fixture(scope="module")
 def tiny_scene() -> tuple[Scene, RenderTables]:
     scene = build_scene(get_scenario("tiny"))
@@ -72,7 +60,7 @@ def render(
     end_s: float,
     twist: NDArray[np.float64] | None,
     seed: int,
-) -> SimScan:
+) -> RadarFrame:
     """The scan whose last azimuth is seen at `end_pose` at `end_s`; with `twist`, azimuth j
     is seen from the pose the constant twist gives at its own time (motion distortion)."""
     offsets = tables.column_offsets_s  # <= 0, the last azimuth at the scan's end
@@ -83,7 +71,7 @@ def render(
     polar = render_scan(scene.world, poses, end_s + offsets, tables, np.random.default_rng(seed))
     stamp = int(round(end_s * NS_PER_S))
     times = (stamp + np.round(offsets * NS_PER_S)).astype(np.int64)
-    return SimScan(
+    return RadarFrame(
         timestamp_ns=stamp,
         polar=polar,
         azimuths_rad=tables.sensor.azimuths_ccw_rad(),
@@ -95,7 +83,7 @@ def render(
 
 def known_pair(
     scene: Scene, tables: RenderTables, case: int, distorted: bool
-) -> tuple[SimScan, SimScan, NDArray[np.float64]]:
+) -> tuple[RadarFrame, RadarFrame, NDArray[np.float64]]:
     """Two scans of the same world, the second after a known motion; returns the motion."""
     start_s = SCENE_TIMES_S[case]
     dx, dy, dyaw_deg = KNOWN_MOTIONS[case]

@@ -14,13 +14,11 @@ import pytest
 from odometry.se2 import between
 from radar_slam.datasets.frame import Sequence
 from radar_slam.errors import ConfigError, RadarSlamError
+from radar_slam.false_loops import FakeLoopConfig, FalseLoopInjection
 from radar_slam.g2o import G2oEdge, G2oGraph
 from radar_slam.loops import (
     GeometricVerifier,
-    KeyScan,
     LoopDetector,
-    Verification,
-    Verifier,
     is_true_loop,
 )
 from radar_slam.metrics import evaluate
@@ -32,11 +30,19 @@ from radar_slam.pipeline import (
     load_config,
 )
 from radar_slam.trajectory import Trajectory
-from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.retrieval import PlaceRecognizer
 
 MAX_ATE_RATIO = 0.4  # SLAM / odometry ATE on synthetic/tiny_loop (measured 0.19)
 FALSE_FRACTION = 0.3
-FALSE_MIN_DISTANCE_M = 50.0
+FAKE_LOOP = FakeLoopConfig(
+    min_distance_m=50.0,
+    max_offset_m=3.0,
+    max_offset_yaw_rad=0.2,
+    sigma_xy_m=0.05,
+    sigma_yaw_rad=float(np.deg2rad(0.1)),
+    sinogram_quality=0.9,
+    refined_quality=100.0,
+)
 MAX_ATE_RISE = 0.10
 INJECTION_SEED = 3
 
@@ -59,67 +65,6 @@ def test_a_revisit_closes_the_loop_and_the_ate_drops(tiny_loop: Sequence, baseli
     assert m.frames_per_second > 0
 
 
-class Injection:
-    """On a fraction of the queries a random database entry is put first (`InjectingRecognizer`);
-    the fake verifier passes it with a plausible measurement when it lies more than
-    FALSE_MIN_DISTANCE_M from the query (a false loop) and ignores it otherwise, so that the
-    injection adds false loops and nothing else (`InjectingVerifier`)."""
-
-    def __init__(self, ground_truth: np.ndarray, fraction: float) -> None:
-        self.gt = ground_truth
-        self.fraction = fraction
-        self.rng = np.random.default_rng(INJECTION_SEED)
-        self.injected_key: int | None = None  # of the current query
-        self.passed: set[tuple[int, int]] = set()
-
-    def recognizer(self, inner: PlaceRecognizer) -> InjectingRecognizer:
-        return InjectingRecognizer(inner, self)
-
-    def verifier(self, inner: Verifier) -> InjectingVerifier:
-        return InjectingVerifier(inner, self)
-
-
-class InjectingRecognizer:
-    def __init__(self, inner: PlaceRecognizer, injection: Injection) -> None:
-        self.inner, self.injection, self.keys = inner, injection, []
-
-    def add(self, descriptor: np.ndarray, key: int, time_s: float | None = None) -> None:
-        self.inner.add(descriptor, key, time_s)
-        self.keys.append(key)
-
-    def query(self, descriptor: np.ndarray, k: int = 1, time_s: float | None = None):
-        found = self.inner.query(descriptor, k, time_s)
-        inj = self.injection
-        inj.injected_key = None
-        if not self.keys or inj.rng.random() >= inj.fraction:
-            return found
-        index = int(inj.rng.integers(len(self.keys)))
-        inj.injected_key = self.keys[index]
-        others = [c for c in found if c.key != inj.injected_key]
-        return [Candidate(inj.injected_key, index, 0.0, 0.0, np.pi), *others]
-
-
-class InjectingVerifier:
-    def __init__(self, inner: Verifier, injection: Injection) -> None:
-        self.inner, self.injection = inner, injection
-
-    def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
-        inj = self.injection
-        if match.key != inj.injected_key:
-            return self.inner(query, match)
-        if np.hypot(*(inj.gt[query.key, :2] - inj.gt[match.key, :2])) <= FALSE_MIN_DISTANCE_M:
-            nan = np.full(3, np.nan)
-            return Verification(
-                False, "injected near the query", nan, np.full((3, 3), np.nan), nan, 0.0
-            )
-        inj.passed.add((query.key, match.key))
-        fake = np.array(
-            [inj.rng.uniform(-3, 3), inj.rng.uniform(-3, 3), inj.rng.uniform(-0.2, 0.2)]
-        )
-        cov = np.diag([0.05**2, 0.05**2, np.deg2rad(0.1) ** 2])
-        return Verification(True, "", fake, cov, fake, 0.9, 100.0)
-
-
 def test_thirty_percent_false_loops_raise_the_ate_at_most_ten_percent(
     tiny_loop: Sequence, baseline: Results
 ) -> None:
@@ -127,7 +72,9 @@ def test_thirty_percent_false_loops_raise_the_ate_at_most_ten_percent(
     assert gt is not None
     config = load_config("synthetic")
     cfg = config.loop_closure
-    injection = Injection(np.asarray(gt), FALSE_FRACTION)
+    injection = FalseLoopInjection(
+        np.asarray(gt), FALSE_FRACTION, np.random.default_rng(INJECTION_SEED), FAKE_LOOP
+    )
     detector = LoopDetector(
         cfg,
         scan_loader=lambda k: tiny_loop[k],

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from raplace_scenes import (
     angle_error,
-    oxford_scans,
     render_cart,
     render_polar,
     synthetic_world,
@@ -35,11 +34,6 @@ CFG = DescriptorConfig()
 @pytest.fixture(scope="module")
 def world() -> np.ndarray:
     return synthetic_world(1600, seed=0)  # 400 m x 400 m
-
-
-@pytest.fixture(scope="module")
-def oxford(oxford_dir):
-    return oxford_scans(oxford_dir)
 
 
 def _descriptor_at(world: np.ndarray, pose: tuple[float, float, float]) -> np.ndarray:
@@ -145,11 +139,11 @@ def test_descriptor_translation_invariant_and_discriminative(world: np.ndarray) 
 
 
 @pytest.mark.realdata
-def test_oxford_near_scans_close_other_patterns_far(oxford) -> None:
+def test_oxford_near_scans_close_other_patterns_far(oxford_polar_scans) -> None:
     extract = DescriptorExtractor(CFG)
-    first = extract(*oxford[0])
-    second = extract(*oxford[1])  # about 2.4 m further
-    polar, azimuths, res = oxford[0]
+    first = extract(*oxford_polar_scans[0])
+    second = extract(*oxford_polar_scans[1])  # about 2.4 m further
+    polar, azimuths, res = oxford_polar_scans[0]
     shuffled = extract(polar[np.random.default_rng(0).permutation(len(polar))], azimuths, res)
     other = extract(*render_polar(synthetic_world(1600, seed=1), WORLD_CELL_M, (0.0, 0.0, 0.0)))
     near = _distance_and_yaw(second, first)[0]
@@ -160,10 +154,10 @@ def test_oxford_near_scans_close_other_patterns_far(oxford) -> None:
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("rows", [0, 37, 100, 200, 333])
-def test_oxford_rotation_recovered(oxford, rows: int) -> None:
+def test_oxford_rotation_recovered(oxford_polar_scans, rows: int) -> None:
     """Rolling the polar rows by n rotates the scene by -n * 0.9 deg (the sweep is clockwise)."""
     extract = DescriptorExtractor(CFG)
-    polar, azimuths, res = oxford[0]
+    polar, azimuths, res = oxford_polar_scans[0]
     distance, yaw = _distance_and_yaw(
         extract(np.roll(polar, rows, axis=0), azimuths, res), extract(polar, azimuths, res)
     )

@@ -6,7 +6,7 @@ import csv
 
 import numpy as np
 import pytest
-from raplace_scenes import angle_error, oxford_scans, relative, render_cart, synthetic_world
+from raplace_scenes import angle_error, relative, render_cart, synthetic_world
 
 from raplace import RaPlaceError
 from raplace.config import ImageConfig, PoseConfig, PreprocessConfig
@@ -41,17 +41,12 @@ def world() -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def oxford(oxford_dir):
-    return oxford_scans(oxford_dir)
-
-
-@pytest.fixture(scope="module")
-def oxford_world(oxford) -> np.ndarray:
+def oxford_world(oxford_polar_scans) -> np.ndarray:
     """A cleaned 150 m-radius Cartesian image of the first Oxford scan, used as a world."""
     imager = CartesianImager(
         PreprocessConfig(), ImageConfig(cell_m=WORLD_CELL_M, max_range_m=150.0, taper_fraction=0.0)
     )
-    return imager(*oxford[0])
+    return imager(*oxford_polar_scans[0])
 
 
 def _crop(world: np.ndarray, pose: tuple[float, float, float]) -> np.ndarray:
@@ -78,14 +73,14 @@ def test_oxford_crops_rotation_and_translation(oxford_world, pose_q, pose_m) -> 
 
 
 @pytest.mark.realdata
-def test_oxford_consecutive_scans_match_ground_truth(oxford_dir, oxford) -> None:
+def test_oxford_consecutive_scans_match_ground_truth(oxford_dir, oxford_polar_scans) -> None:
     """Real scan pairs about 2 m apart against the dataset's radar odometry (x-fwd, y-right)."""
     stems = sorted(p.stem for p in (oxford_dir / "radar").glob("*.png"))
     with open(oxford_dir / "gt" / "radar_odometry.csv") as handle:
         rows = {r["destination_radar_timestamp"]: r for r in csv.DictReader(handle)}
     estimator = PoseEstimator(CFG)
-    images = [estimator.image(*scan) for scan in oxford]
-    for i in range(len(oxford) - 1):
+    images = [estimator.image(*scan) for scan in oxford_polar_scans]
+    for i in range(len(oxford_polar_scans) - 1):
         row = rows[stems[i]]
         assert row["source_radar_timestamp"] == stems[i + 1]
         # Later scan in the earlier scan's frame; y-left, CCW yaw flip the signs of y and yaw.
@@ -97,11 +92,16 @@ def test_oxford_consecutive_scans_match_ground_truth(oxford_dir, oxford) -> None
 
 
 @pytest.mark.realdata
-def test_quality_separates_same_and_other_place(oxford, world) -> None:
+def test_quality_separates_same_and_other_place(oxford_polar_scans, world) -> None:
     estimator = PoseEstimator(CFG)
-    same = estimator.estimate(estimator.image(*oxford[0]), estimator.image(*oxford[2]))
+    same = estimator.estimate(
+        estimator.image(*oxford_polar_scans[0]), estimator.image(*oxford_polar_scans[2])
+    )
     other = relative_pose(
-        estimator.image(*oxford[0]), _crop(world, (0.0, 0.0, 0.0)), CFG.image.cell_m, CFG
+        estimator.image(*oxford_polar_scans[0]),
+        _crop(world, (0.0, 0.0, 0.0)),
+        CFG.image.cell_m,
+        CFG,
     )
     assert same.quality > 0.5
     assert other.quality < 0.2

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from raplace_scenes import angle_error, oxford_scans, render_polar, synthetic_world
+from raplace_scenes import angle_error, render_polar, synthetic_world
 
 from raplace import RaPlaceError
 from raplace.config import ExclusionConfig, ScanContextConfig
@@ -19,11 +19,6 @@ from raplace.scancontext import (
 
 CFG = ScanContextConfig()
 SECTOR_DEG = 360.0 / CFG.n_sectors
-
-
-@pytest.fixture(scope="module")
-def oxford(oxford_dir):
-    return oxford_scans(oxford_dir)
 
 
 def _distance(query: np.ndarray, entry: np.ndarray) -> tuple[float, float]:
@@ -43,10 +38,10 @@ def test_context_bins_follow_the_convention() -> None:
 
 
 @pytest.mark.realdata
-def test_same_place_closer_than_other_places(oxford) -> None:
+def test_same_place_closer_than_other_places(oxford_polar_scans) -> None:
     extract = ScanContextExtractor(CFG)
-    first, second = extract(*oxford[0]), extract(*oxford[1])
-    polar, azimuths, res = oxford[0]
+    first, second = extract(*oxford_polar_scans[0]), extract(*oxford_polar_scans[1])
+    polar, azimuths, res = oxford_polar_scans[0]
     shuffled = extract(polar[np.random.default_rng(0).permutation(len(polar))], azimuths, res)
     other = extract(*render_polar(synthetic_world(1600, seed=1), 0.25, (0.0, 0.0, 0.0)))
     near = _distance(second, first)[0]
@@ -56,9 +51,9 @@ def test_same_place_closer_than_other_places(oxford) -> None:
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("rows", [100, 200, 300])
-def test_rotation_by_whole_sectors_is_exact(oxford, rows: int) -> None:
+def test_rotation_by_whole_sectors_is_exact(oxford_polar_scans, rows: int) -> None:
     """Rolling the 400 polar rows by a multiple of 100 turns the scene by whole sectors."""
-    polar, azimuths, res = oxford[0]
+    polar, azimuths, res = oxford_polar_scans[0]
     extract = ScanContextExtractor(CFG)
     distance, yaw = _distance(
         extract(np.roll(polar, rows, axis=0), azimuths, res), extract(polar, azimuths, res)
@@ -69,12 +64,12 @@ def test_rotation_by_whole_sectors_is_exact(oxford, rows: int) -> None:
 
 @pytest.mark.realdata
 @pytest.mark.parametrize("rows", [37, 171, 250])
-def test_rotation_by_any_angle_within_a_sector(oxford, rows: int) -> None:
-    polar, azimuths, res = oxford[0]
+def test_rotation_by_any_angle_within_a_sector(oxford_polar_scans, rows: int) -> None:
+    polar, azimuths, res = oxford_polar_scans[0]
     extract = ScanContextExtractor(CFG)
     reference = extract(polar, azimuths, res)
     distance, yaw = _distance(extract(np.roll(polar, rows, axis=0), azimuths, res), reference)
-    assert distance < _distance(extract(*oxford[1]), reference)[0]
+    assert distance < _distance(extract(*oxford_polar_scans[1]), reference)[0]
     assert np.rad2deg(angle_error(yaw, np.deg2rad(-0.9 * rows))) <= SECTOR_DEG
 
 

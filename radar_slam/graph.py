@@ -255,7 +255,9 @@ def loop_noise(
     return base if estimator is None else gtsam.noiseModel.Robust.Create(estimator, base)
 
 
-def _m_estimator(kernel: str, width: float) -> gtsam.noiseModel.mEstimator.Base | None:
+def _m_estimator(
+    kernel: str, width: float
+) -> gtsam.noiseModel.mEstimator.Cauchy | gtsam.noiseModel.mEstimator.Huber | None:
     if kernel == "cauchy":
         return gtsam.noiseModel.mEstimator.Cauchy.Create(width)
     if kernel == "huber":

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -47,13 +49,14 @@ def plot_trajectories(
     names = sorted(trajectories, key=lambda name: name != GT_KEY)  # gt first, order kept
     for name in names:
         xy = trajectories[name].positions
-        style = {"color": "black"} if name == GT_KEY else {}
+        style: dict[str, Any] = {"color": "black"} if name == GT_KEY else {}
         axes.plot(xy[:, 0], xy[:, 1], label=name, linewidth=TRAJECTORY_LINE_WIDTH, **style)
     if loops is not None and len(loops):
         segments = np.asarray(loops, dtype=np.float64).reshape(-1, LOOP_COLUMNS).reshape(-1, 2, 2)
         axes.add_collection(
             LineCollection(
-                segments,
+                # matplotlib's stubs want a Sequence; an (M, 2, 2) array is documented as accepted.
+                cast(Sequence[NDArray[np.float64]], segments),
                 colors=LOOP_COLOR,
                 linewidths=LOOP_LINE_WIDTH,
                 alpha=LOOP_ALPHA,

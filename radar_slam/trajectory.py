@@ -97,7 +97,7 @@ class Trajectory:
         if drop_nonfinite and len(timestamps) == len(poses_arr):
             keep = np.isfinite(poses_arr).all(axis=1)
             if not keep.all():
-                logger.info("dropping %d of %d non-finite poses", (~keep).sum(), len(keep))
+                logger.info("dropping %d of %d non-finite poses", (~keep).sum(), len(poses_arr))
             timestamps, poses_arr = timestamps[keep], poses_arr[keep]
         return cls(timestamps, poses_arr)
 

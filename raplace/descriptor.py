@@ -147,7 +147,7 @@ def sinogram(
     """
     spec = image_spectrum(cart, cell_m, pad_factor)
     size = spec.size
-    freqs = (np.arange(size) - size // 2) * spec.freq_step_cpm
+    freqs = (np.arange(size, dtype=np.float64) - size // 2) * spec.freq_step_cpm
     thetas = np.arange(n_theta) * np.pi / n_theta
     rows = radial_spectrum(spec, thetas, freqs).astype(np.complex128)
     # Frequencies are in fftshift order and l = 0 must land on column size // 2.
@@ -163,7 +163,7 @@ def descriptor_angles(n_theta: int, oversample: int = 1) -> NDArray[np.float64]:
 
 def descriptor_freqs(n_freq: int, max_freq_cpm: float) -> NDArray[np.float64]:
     """(n_freq,) frequencies k_j = j * max_freq_cpm / n_freq, j = 1..n_freq [cycles/m]."""
-    return np.arange(1, n_freq + 1) * (max_freq_cpm / n_freq)
+    return np.arange(1, n_freq + 1, dtype=np.float64) * (max_freq_cpm / n_freq)
 
 
 def z_normalise(values: NDArray) -> NDArray[np.float32]:

@@ -272,8 +272,8 @@ def relative_pose(
         raise RaPlaceError(f"pose n_theta must be even and >= 4, got {cfg.n_theta}")
     query_fft = image_spectrum(query_cart, cell_m, cfg.pad_factor)
     map_fft = image_spectrum(map_cart, cell_m, cfg.pad_factor)
-    thetas = np.arange(cfg.n_theta) * (np.pi / cfg.n_theta)
-    freqs = np.arange(query_fft.size // 2 + 1) * query_fft.freq_step_cpm
+    thetas = np.arange(cfg.n_theta, dtype=np.float64) * (np.pi / cfg.n_theta)
+    freqs = np.arange(query_fft.size // 2 + 1, dtype=np.float64) * query_fft.freq_step_cpm
     spectra = _Spectra(
         query=radial_spectrum(query_fft, thetas, freqs),
         map_fft=map_fft,

@@ -9,6 +9,8 @@ from +x (forward) in a frame x-forward, y-left; bin k is centred at (k + 0.5) * 
 
 from __future__ import annotations
 
+from typing import cast
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -50,7 +52,8 @@ def resample_range(
     if factor == 1:
         return cropped, float(range_resolution_m)
     resized = cv2.resize(cropped, (n_out, polar.shape[0]), interpolation=cv2.INTER_AREA)
-    return resized, factor * float(range_resolution_m)
+    # OpenCV's stubs return a generic MatLike; resize keeps the float32 source dtype.
+    return cast(NDArray[np.float32], resized), factor * float(range_resolution_m)
 
 
 def suppress_noise(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.fft
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from raplace import RaPlaceError
 
@@ -40,7 +40,7 @@ def autocorrelation_peak(desc: NDArray) -> float:
 
 
 def parabolic_vertex(
-    before: NDArray, centre: NDArray, after: NDArray, limit: float = 0.5
+    before: ArrayLike, centre: ArrayLike, after: ArrayLike, limit: float = 0.5
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Vertex of the parabola through samples at -1, 0, +1: (value, offset in [-limit, limit])."""
     before, centre, after = (np.asarray(v, dtype=np.float64) for v in (before, centre, after))

@@ -12,6 +12,7 @@ Backward warping gives every Cartesian pixel the bilinear value of its polar sam
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -90,7 +91,7 @@ def remap(
     polar: NDArray, bins: NDArray[np.float32], rows: NDArray[np.float32]
 ) -> NDArray[np.float32]:
     """Sample `polar` (n_azimuths, n_bins) bilinearly at fractional (bins, rows); 0 outside."""
-    return cv2.remap(
+    sampled = cv2.remap(
         wrap_rows(polar),
         bins,
         rows,
@@ -98,6 +99,8 @@ def remap(
         borderMode=cv2.BORDER_CONSTANT,
         borderValue=0.0,
     )
+    # OpenCV's stubs return a generic MatLike; remap keeps the float32 source dtype.
+    return cast(NDArray[np.float32], sampled)
 
 
 class CartesianWarper:

@@ -13,7 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import typer
-from tqdm import tqdm  # type: ignore[import-untyped]
+from tqdm import tqdm
 
 from radar_slam.commands.data import DATA_ROOT_OPTION
 from radar_slam.errors import ResultsError

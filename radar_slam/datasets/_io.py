@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -48,7 +49,8 @@ def read_gray_png(path: Path, shape: tuple[int, int]) -> NDArray[np.uint8]:
             f"{path}: scan has shape {image.shape[0]} x {image.shape[1]}, expected "
             f"{shape[0]} x {shape[1]}"
         )
-    return image
+    # OpenCV's stubs return a generic MatLike; the dtype was checked to be uint8 above.
+    return cast(NDArray[np.uint8], image)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from radar_slam.datasets.frame import Sequence
 from radar_slam.datasets.mulran import MulRanSequence, is_mulran_sequence
+from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
 from radar_slam.datasets.registry import Family, family_folder, register
 from radar_slam.errors import DatasetNotFoundError, RadarSlamError
 
@@ -131,15 +132,13 @@ def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Seq
         )
     world = read_json(folder / WORLD_FILE) or {}
     sensor = world.get("sensor", {})
-    kwargs = {}
+    n_bins, resolution_m = MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
     if isinstance(sensor, dict) and "n_bins" in sensor and "range_resolution_m" in sensor:
-        kwargs = {
-            "n_bins": int(sensor["n_bins"]),
-            "range_resolution_m": float(sensor["range_resolution_m"]),
-        }
+        n_bins = int(sensor["n_bins"])
+        resolution_m = float(sensor["range_resolution_m"])
     if range_resolution_m is not None:
-        kwargs["range_resolution_m"] = range_resolution_m
-    return MulRanSequence(folder, family=SYNTHETIC_FAMILY, **kwargs)
+        resolution_m = range_resolution_m
+    return MulRanSequence(folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY)
 
 
 SYNTHETIC = register(

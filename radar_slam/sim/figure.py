@@ -83,7 +83,7 @@ def _draw_town(ax: plt.Axes, scene: Scene, shown: list[int]) -> None:
             ax.scatter(points[:, 0], points[:, 1], s=size, c=colour, lw=0, zorder=3)
     ends = scene.scan_end_offsets_ns(scene.n_frames)
     radar = scene.radar_poses(ends)[:, :2] - origin
-    ax.scatter(*radar.T, c=np.arange(len(radar)), cmap="viridis", s=3, zorder=4)
+    ax.scatter(radar[:, 0], radar[:, 1], c=np.arange(len(radar)), cmap="viridis", s=3, zorder=4)
     for k in shown:
         ax.annotate(
             f"#{k}",

@@ -27,6 +27,7 @@ Effects, in the order `render.render_scan` applies them:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -341,7 +342,9 @@ def log_path_gain(log_range: NDArray[np.float32], cfg: PathLoss) -> NDArray[np.f
     log_r = np.maximum(log_range, np.float32(np.log(cfg.min_range_m)))
     near = np.float32(cfg.exponent) * (np.float32(np.log(cfg.reference_range_m)) - log_r)
     beyond = np.maximum(log_r - np.float32(np.log(cfg.knee_range_m)), np.float32(0))
-    return near - np.float32(cfg.far_exponent - cfg.exponent) * beyond
+    gain = near - np.float32(cfg.far_exponent - cfg.exponent) * beyond
+    # numpy's stubs drop the float32 precision of array-scalar arithmetic; all operands are float32.
+    return cast(NDArray[np.float32], gain)
 
 
 def path_gain(range_m: NDArray[np.float32], cfg: PathLoss) -> NDArray[np.float32]:

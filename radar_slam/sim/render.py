@@ -19,6 +19,7 @@ offset applied in the log domain, and returns are pre-divided by the same per-bi
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import cast
 
 import cv2
 import numpy as np
@@ -283,7 +284,8 @@ def _static_returns(
     diffuse = sc.diffuse[ok]
     incidence = diffuse + (np.float32(1) - diffuse) * cos_inc ** np.float32(world.specular_exponent)
     slant, elevation_gain = _elevation(r, sc.z[ok], phys)
-    power = sc.power[ok] * path_gain(slant, phys.path_loss) * incidence * elevation_gain
+    # numpy's stubs drop the float32 precision of this product; all factors are float32.
+    power = cast(F32, sc.power[ok] * path_gain(slant, phys.path_loss) * incidence * elevation_gain)
     if buffer is not None:
         power *= _occlusion_gain(buffer, nearest, r, sc.owner[ok], phys.occlusion.tolerance_m)
     return Returns(column, slant, power, np.zeros(0, np.float32)), sc.ghost_delay_m[ok]
@@ -297,9 +299,9 @@ def _elevation(
     if not cfg.enabled:
         return ground_range_m, np.ones_like(ground_range_m)
     dz = (
-        np.float32(height_m) - np.float32(cfg.sensor_height_m)
-        if np.isscalar(height_m)
-        else (height_m - np.float32(cfg.sensor_height_m))
+        (height_m - np.float32(cfg.sensor_height_m))
+        if isinstance(height_m, np.ndarray)
+        else np.float32(height_m) - np.float32(cfg.sensor_height_m)
     )
     slant = np.sqrt(ground_range_m * ground_range_m + dz * dz)
     sine = dz / slant  # small-angle: elevation ~ sin(elevation)
@@ -476,17 +478,19 @@ def to_output(field: NDArray[np.complex64], tables: RenderTables) -> NDArray[np.
     """Point-spread along range, log compression, quantisation, saturation, blanking."""
     pairs = field.view(np.float32).reshape(field.shape + (2,))
     mean = UNIFORM_U8_MEAN if tables.physics.noise_floor.enabled else 0.0
-    pairs = cv2.filter2D(  # a 1 x L kernel filters along range (faster than sepFilter2D)
+    filtered = cv2.filter2D(  # a 1 x L kernel filters along range (faster than sepFilter2D)
         pairs,
         -1,
         tables.psf[None, :],
         delta=-mean * float(tables.psf.sum()),
         borderType=cv2.BORDER_REFLECT_101,
     )
-    amplitude = np.abs(pairs.view(np.complex64)[..., 0])
-    log_amp = cv2.log(amplitude)  # ln(0) = -inf is clamped to level 0 below
+    amplitude = np.abs(filtered.view(np.complex64)[..., 0])
+    # OpenCV's stubs return a generic MatLike; log keeps the float32 source dtype.
+    log_amp = cast(F32, cv2.log(amplitude))  # ln(0) = -inf is clamped to level 0 below
     log_amp += tables.log_offset
-    log_amp = cv2.max(log_amp, 0.0)
+    # OpenCV's stubs lack the (array, scalar) overload of cv2.max that the bindings accept.
+    log_amp = cv2.max(log_amp, 0.0)  # type: ignore[call-overload]
     # amplitude: 40 levels per decade; LUT input is round(LUT_STEPS_PER_LEVEL * 20 log10 P)
     scale = LUT_STEPS_PER_LEVEL * 2.0 * OUTPUT_LEVELS_PER_DECADE / np.log(10.0)
     level = cv2.convertScaleAbs(log_amp, alpha=scale)  # rounds and saturates at 255
@@ -497,7 +501,8 @@ def to_output(field: NDArray[np.complex64], tables: RenderTables) -> NDArray[np.
         (tables.n_field_bins * RANGE_DECIMATION, sensor.n_azimuths),
         interpolation=cv2.INTER_LINEAR,
     )
-    out = cv2.LUT(wide[:, : sensor.n_bins], tables.lut)
+    # OpenCV's stubs return a generic MatLike; LUT output has the uint8 dtype of the table.
+    out = cast(NDArray[np.uint8], cv2.LUT(wide[:, : sensor.n_bins], tables.lut))
     if tables.n_blank:
         out[:, : tables.n_blank] = tables.physics.near_range.blank_level
     return out

@@ -348,7 +348,10 @@ def _facades(
     builder: _Builder, town: Town, cfg: ObjectConfig, rng: np.random.Generator
 ) -> Occluders:
     """Facade samples, features and corners of every building; returns the facade occluders."""
-    p0s, p1s, losses, owners = [], [], [], []
+    p0s: list[NDArray[np.float64]] = []
+    p1s: list[NDArray[np.float64]] = []
+    losses: list[float] = []
+    owners: list[int] = []
     for b in town.buildings:
         loss = rng.uniform(*cfg.facade_penetration_db)
         facade_db = rng.normal(cfg.facade_db_per_m, cfg.facade_sigma_db)

@@ -33,6 +33,17 @@ def _new_figure() -> Figure:
     return figure
 
 
+def display_origin(trajectories: dict[str, Trajectory]) -> NDArray[np.float64]:
+    """The (x, y) [m] subtracted before drawing: the first position of the first trajectory drawn
+    (GT first), so that UTM-like world coordinates (MulRan: ~353000, 4026000) plot as metres from
+    the start. Zero when there is nothing to draw."""
+    names = sorted(trajectories, key=lambda name: name != GT_KEY)
+    for name in names:
+        if len(trajectories[name].positions):
+            return np.asarray(trajectories[name].positions[0], dtype=np.float64)
+    return np.zeros(2)
+
+
 def plot_trajectories(
     path: Path,
     trajectories: dict[str, Trajectory],
@@ -42,17 +53,20 @@ def plot_trajectories(
     """Save a top view (x right, y up, equal axes [m]) of the trajectories as a PNG.
 
     The entry named "gt", if any, is drawn first in black. `loops` is an (M, 4) array of
-    (x1, y1, x2, y2) [m] rows, drawn as thin lines (e.g. accepted loop closures).
+    (x1, y1, x2, y2) [m] rows, drawn as thin lines (e.g. accepted loop closures). Everything is
+    drawn relative to `display_origin`, which the axis labels state when it is not zero.
     """
     figure = _new_figure()
     axes = figure.add_subplot()
+    origin = display_origin(trajectories)
     names = sorted(trajectories, key=lambda name: name != GT_KEY)  # gt first, order kept
     for name in names:
-        xy = trajectories[name].positions
+        xy = trajectories[name].positions - origin
         style: dict[str, Any] = {"color": "black"} if name == GT_KEY else {}
         axes.plot(xy[:, 0], xy[:, 1], label=name, linewidth=TRAJECTORY_LINE_WIDTH, **style)
     if loops is not None and len(loops):
         segments = np.asarray(loops, dtype=np.float64).reshape(-1, LOOP_COLUMNS).reshape(-1, 2, 2)
+        segments = segments - origin
         axes.add_collection(
             LineCollection(
                 # matplotlib's stubs want a Sequence; an (M, 2, 2) array is documented as accepted.
@@ -64,8 +78,9 @@ def plot_trajectories(
             )
         )
     axes.set_aspect("equal", adjustable="datalim")
-    axes.set_xlabel("x [m]")
-    axes.set_ylabel("y [m]")
+    shifted = bool(np.any(origin != 0.0))
+    axes.set_xlabel(f"x - {origin[0]:.1f} [m]" if shifted else "x [m]")
+    axes.set_ylabel(f"y - {origin[1]:.1f} [m]" if shifted else "y [m]")
     axes.grid(True, linewidth=0.3)
     if title:
         axes.set_title(title)

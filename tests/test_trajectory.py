@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from radar_slam.errors import TrajectoryError
-from radar_slam.plots import plot_pr_curves, plot_trajectories
+from radar_slam.plots import display_origin, plot_pr_curves, plot_trajectories
 from radar_slam.trajectory import (
     Trajectory,
     detect_format,
@@ -200,3 +200,13 @@ def test_plots_write_png(tmp_path: Path) -> None:
     pr = tmp_path / "pr.png"
     plot_pr_curves(pr, {"raplace": (np.array([1.0, 0.8, 0.5]), np.array([0.1, 0.5, 0.9]))})
     assert pr.read_bytes()[:4] == PNG_MAGIC
+
+
+def test_display_origin_is_the_first_gt_position() -> None:
+    """UTM-like coordinates are drawn relative to the first GT pose (or the first trajectory)."""
+    gt = curved_trajectory(10)
+    utm = Trajectory(gt.timestamps_ns, gt.poses + [353000.0, 4026000.0, 0.0])
+    est = Trajectory(gt.timestamps_ns, gt.poses)
+    np.testing.assert_allclose(display_origin({"slam": est, "gt": utm}), utm.positions[0])
+    np.testing.assert_allclose(display_origin({"slam": est}), est.positions[0])
+    np.testing.assert_allclose(display_origin({}), [0.0, 0.0])

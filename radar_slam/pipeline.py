@@ -51,6 +51,7 @@ from radar_slam.loops import (
     make_loop_detector,
     rotate_covariance,
 )
+from radar_slam.maps.config import MapsConfig  # issue-13: maps section
 from radar_slam.metrics import TrajectoryMetrics, evaluate
 from radar_slam.trajectory import Trajectory
 
@@ -73,6 +74,7 @@ class PipelineConfig:
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
+    maps: MapsConfig = field(default_factory=MapsConfig)  # issue-13: map building, localisation
 
 
 def family_config_path(family: str) -> Path:

@@ -17,6 +17,8 @@ from tqdm import tqdm
 
 from radar_slam.commands.data import DATA_ROOT_OPTION
 from radar_slam.errors import ResultsError
+from radar_slam.maps.build import build_map  # issue-13: every run writes map/
+from radar_slam.maps.format import write_map  # issue-13
 from radar_slam.outputs import (
     odometry_summary,
     slam_summary,
@@ -34,6 +36,8 @@ from radar_slam.pipeline import (
 )
 from radar_slam.results import result_dir
 
+MAP_FOLDER = "map"
+"""The map every SLAM run writes into its result folder (`radar_slam.maps`, issue-13)."""
 SEQUENCE_ARGUMENT = typer.Argument(
     ..., help="Sequence: family/name (mulran/KAIST01, oxford/..., synthetic/loop) or a folder."
 )
@@ -102,6 +106,7 @@ def run_command(
         results = Pipeline(seq, settings, max_frames=max_frames, progress=update).run()
     folder = result_dir(seq.family, seq.name, out)
     write_results(folder, results)
+    write_map(folder / MAP_FOLDER, build_map(results, seq))  # issue-13
     typer.echo(slam_summary(results), nl=False)
     typer.echo(f"results in {folder}")
 

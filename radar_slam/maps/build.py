@@ -1,0 +1,220 @@
+"""Building a map from a SLAM run: keyframes, descriptors, images, the reduced pose graph.
+
+`build_map(results, sequence)` picks a keyframe every `maps.keyframe_spacing_m` of the optimised
+trajectory, reads those scans again, describes them (RaPlace descriptor, as the loop detector
+does) and stores their de-skewed Cartesian images (`radar_slam.maps.images`). The pose graph is
+the run's graph reduced to the keyframes: an odometry edge between consecutive keyframes (the
+optimised relative pose, the chained odometry covariance) and each accepted loop moved onto the
+keyframes at or before its two scans. With ground truth, the map stores the SE(2) Umeyama
+alignment of the optimised trajectory to it (T_gt_map) and each keyframe's GT pose.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry import OdometryConfig, OdometryResult
+from odometry.deskew import twist_from_motion
+from odometry.se2 import between, compose
+from radar_slam.datasets.frame import Sequence
+from radar_slam.errors import TrajectoryError
+from radar_slam.loops import LoopDecision, rotate_covariance
+from radar_slam.maps.config import MapsConfig
+from radar_slam.maps.format import EDGE_DTYPE, EDGE_KINDS, KEYFRAME_DTYPE, Map, Session
+from radar_slam.maps.images import ImageGeometry, KeyframeImager
+from radar_slam.metrics import associate, umeyama_alignment_se2
+from radar_slam.trajectory import Trajectory
+from raplace.config import DescriptorConfig
+from raplace.descriptor import DescriptorExtractor
+
+if TYPE_CHECKING:
+    from radar_slam.pipeline import Results
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+NS_PER_S = 1e9
+_UPPER = np.triu_indices(3)
+
+
+def select_keyframes(poses: FloatArray, spacing_m: float) -> NDArray[np.int64]:
+    """Indices of the poses (N, 3) that become keyframes: the first, then one each time the
+    path since the previous keyframe reaches `spacing_m` [m]."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if len(poses) == 0:
+        return np.zeros(0, dtype=np.int64)
+    steps = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    chosen = [0]
+    travelled = 0.0
+    for n, step in enumerate(steps, start=1):
+        travelled += float(step)
+        if travelled >= spacing_m:
+            chosen.append(n)
+            travelled = 0.0
+    return np.asarray(chosen, dtype=np.int64)
+
+
+def scan_twists(results: list[OdometryResult]) -> list[FloatArray | None]:
+    """Body twist (vx, vy [m/s], yaw rate [rad/s]) of every scan from the odometry motions
+    (the first scan takes the second's; None for a single scan)."""
+    twists: list[FloatArray | None] = [None] * len(results)
+    for n in range(1, len(results)):
+        dt_s = (results[n].timestamp_ns - results[n - 1].timestamp_ns) / NS_PER_S
+        if dt_s > 0:
+            twists[n] = twist_from_motion(results[n].motion, dt_s)
+    if len(results) > 1:
+        twists[0] = twists[1]
+    return twists
+
+
+def information_upper(covariance: FloatArray) -> FloatArray:
+    """(6,) upper triangle of the inverse of a (3, 3) covariance (g2o order)."""
+    info = np.linalg.inv(np.asarray(covariance, dtype=np.float64))
+    return (0.5 * (info + info.T))[_UPPER]
+
+
+def edge_rows(
+    keyframe_scans: NDArray[np.int64],
+    poses: FloatArray,
+    odometry: list[OdometryResult],
+    loops: list[LoopDecision],
+    index_offset: int = 0,
+) -> NDArray[Any]:
+    """The run's pose graph reduced to its keyframes (`EDGE_DTYPE` rows).
+
+    Args:
+        keyframe_scans: (K,) increasing scan indices of the keyframes.
+        poses: (N, 3) optimised poses of every scan.
+        odometry: the per-scan odometry results (factor covariances).
+        loops: the loop decisions; the accepted ones become loop edges.
+        index_offset: added to the keyframe indices (for a session appended to a map).
+    """
+    rows = []
+    for n in range(1, len(keyframe_scans)):
+        a, b = int(keyframe_scans[n - 1]), int(keyframe_scans[n])
+        covariance = np.zeros((3, 3))
+        for s in range(a + 1, b + 1):
+            yaw_to_b = float(between(poses[s], poses[b])[2])
+            covariance += rotate_covariance(odometry[s].covariance, yaw_to_b)
+        measurement = between(poses[a], poses[b])
+        odometry_kind = EDGE_KINDS.index("odometry")
+        rows.append((n - 1, n, odometry_kind, measurement, information_upper(covariance)))
+    owner = np.searchsorted(keyframe_scans, np.arange(len(poses)), side="right") - 1
+    for loop in loops:
+        if not loop.accepted:
+            continue
+        kq, km = int(owner[loop.query_key]), int(owner[loop.match_key])
+        if kq == km:
+            continue
+        lead = between(poses[keyframe_scans[kq]], poses[loop.query_key])
+        tail = between(poses[loop.match_key], poses[keyframe_scans[km]])
+        measurement = compose(compose(lead, loop.measurement), tail)
+        covariance = rotate_covariance(loop.covariance, float(tail[2]))
+        rows.append((kq, km, EDGE_KINDS.index("loop"), measurement, information_upper(covariance)))
+    edges = np.array(rows, dtype=EDGE_DTYPE) if rows else np.zeros(0, dtype=EDGE_DTYPE)
+    edges["i"] += index_offset
+    edges["j"] += index_offset
+    return edges
+
+
+def gt_alignment(slam: Trajectory, gt: Trajectory | None) -> FloatArray | None:
+    """SE(2) T_gt_slam by Umeyama over the associated poses, or None."""
+    if gt is None:
+        return None
+    try:
+        return np.asarray(umeyama_alignment_se2(*associate(slam, gt)), dtype=np.float64)
+    except TrajectoryError as exc:
+        log.warning("map without GT alignment: %s", exc)
+        return None
+
+
+def map_settings(cfg: MapsConfig, descriptor: DescriptorConfig) -> dict[str, Any]:
+    """The settings recorded in map.json (plain JSON)."""
+    return {
+        "keyframe_spacing_m": cfg.keyframe_spacing_m,
+        "image": asdict(cfg.image),
+        "descriptor": asdict(descriptor),
+    }
+
+
+def describe_keyframes(
+    sequence: Sequence,
+    scans: NDArray[np.int64],
+    twists: list[FloatArray | None],
+    image: ImageGeometry,
+    odometry: OdometryConfig,
+    descriptor: DescriptorConfig,
+) -> tuple[NDArray[np.float16], list[bytes], NDArray[np.float32]]:
+    """Read the keyframe scans again: (K, n_theta, n_freq) float16 descriptors, PNG images and
+    their intensity scales."""
+    describe = DescriptorExtractor(descriptor)
+    imager = KeyframeImager(image, odometry)
+    descriptors, images, scales = [], [], []
+    for scan in scans:
+        frame = sequence[int(scan)]
+        descriptors.append(describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m))
+        png, scale = imager.encode(imager.image(frame, twists[int(scan)]))
+        images.append(png)
+        scales.append(scale)
+    shape = (len(scans), *describe.shape)
+    return (
+        np.asarray(descriptors, dtype=np.float16).reshape(shape),
+        images,
+        np.asarray(scales, dtype=np.float32),
+    )
+
+
+def keyframe_rows(
+    session: int,
+    scans: NDArray[np.int64],
+    timestamps_ns: NDArray[np.int64],
+    poses: FloatArray,
+    gt_poses: FloatArray | None,
+    scales: NDArray[np.float32],
+) -> NDArray[Any]:
+    """`KEYFRAME_DTYPE` rows of one session's keyframes (image offsets filled in on writing)."""
+    rows = np.zeros(len(scans), dtype=KEYFRAME_DTYPE)
+    rows["session"] = session
+    rows["scan"] = scans
+    rows["timestamp_ns"] = timestamps_ns[scans]
+    rows["pose"] = poses[scans]
+    rows["gt_pose"] = np.nan if gt_poses is None else gt_poses[scans]
+    rows["image_scale"] = scales
+    return rows
+
+
+def build_map(results: Results, sequence: Sequence, poses: FloatArray | None = None) -> Map:
+    """A one-session map of a SLAM run (keyframes from `results.slam`, or from `poses`).
+
+    Args:
+        results: the run.
+        sequence: the sequence it ran on (keyframe scans are read again).
+        poses: (N, 3) poses to use instead of `results.slam` (e.g. already in another frame).
+    """
+    cfg = results.config.maps
+    descriptor_cfg = results.config.loop_closure.raplace.descriptor
+    slam = results.slam if poses is None else Trajectory(results.slam.timestamps_ns, poses)
+    scans = select_keyframes(slam.poses, cfg.keyframe_spacing_m)
+    twists = scan_twists(results.odometry_results)
+    descriptors, images, scales = describe_keyframes(
+        sequence, scans, twists, cfg.image, results.config.odometry, descriptor_cfg
+    )
+    stamps = slam.timestamps_ns
+    keyframes = keyframe_rows(0, scans, stamps, slam.poses, results.ground_truth_poses, scales)
+    edges = edge_rows(scans, slam.poses, results.odometry_results, results.loops)
+    session = Session(results.sequence, len(slam), int(stamps[0]), int(stamps[-1]))
+    log.info("map of %s: %d keyframes, %d edges", results.sequence, len(scans), len(edges))
+    return Map(
+        keyframes=keyframes,
+        descriptors=descriptors,
+        images=tuple(images),
+        edges=edges,
+        sessions=(session,),
+        settings=map_settings(cfg, descriptor_cfg),
+        gt_alignment=gt_alignment(slam, results.ground_truth),
+    )

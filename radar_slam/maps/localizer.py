@@ -1,0 +1,381 @@
+"""Localisation in a map: global relocalisation, then tracking fused in a sliding window.
+
+`Localizer(map, config).localize(frame)` places each scan in the map frame:
+
+- **lost -> relocalised.** Every `relocalise_every_m` of travel the scan's RaPlace descriptor is
+  looked up in the whole map (no exclusion window) and the best candidates are verified as loops
+  are (`radar_slam.loops.GeometricVerifier`, both pi hypotheses of the rotation, against the
+  keyframe's stored image made back into a scan). A verified match gives a pose hypothesis
+  T_map_scan = T_map_keyframe * z^-1; it is only believed once a second hypothesis, at least
+  `relocalise_every_m` later, agrees with the first carried forward by the odometry
+  (`confirm_max_error_m/_deg`): a single wrong match never places the vehicle.
+- **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is verified against
+  the nearest map keyframes to the prediction (within `search_radius_m`). A fix that agrees with
+  the prediction (`max_innovation_m/_deg`) enters a small pose graph (`radar_slam.graph`): the
+  scans of the latest `window_fixes` fixes joined by the odometry between them, each fix a loop
+  factor (robust kernel) to its keyframe, the keyframes held by tight priors at their map poses.
+  The fused pose of the newest scan is the new anchor of the prediction.
+- **lost.** After `lost_after_m` of travel without an accepted fix, tracking has lost the map:
+  back to global relocalisation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry import Odometry, OdometryResult, Scan
+from odometry.deskew import twist_from_motion
+from odometry.se2 import between, compose, inverse, wrap_angle
+from radar_slam.config import merge
+from radar_slam.datasets.frame import RadarFrame
+from radar_slam.errors import ConfigError, GraphError
+from radar_slam.graph import GraphConfig, PoseGraph
+from radar_slam.loops import GeometricVerifier, KeyScan, Verification, rotate_covariance
+from radar_slam.maps.format import Map, MapError
+from radar_slam.maps.images import ImageGeometry, KeyframeImager
+from raplace.config import DescriptorConfig, ExclusionConfig
+from raplace.descriptor import DescriptorExtractor
+from raplace.retrieval import PlaceRecognizer
+
+if TYPE_CHECKING:
+    from radar_slam.pipeline import PipelineConfig
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+Status = Literal["relocalised", "tracked", "lost"]
+NS_PER_S = 1e9
+MAP_KEY_BASE = 1 << 40
+"""Graph keys of map keyframes in the window graph (scan keys are scan indices)."""
+IMAGE_CACHE_SIZE = 64
+"""Map keyframes kept as ready-made scans."""
+_WINDOW_GRAPH = GraphConfig(final_pass="lm")
+
+
+@dataclass(frozen=True)
+class Localization:
+    """Where one scan is in the map (a row of localization.csv).
+
+    Attributes:
+        timestamp_ns: the scan's time [ns].
+        status: "relocalised" (placed by global relocalisation now), "tracked" or "lost".
+        pose: (3,) T_map_radar (x, y [m], yaw [rad]); NaN when lost.
+        map_key: index of the map keyframe of the latest accepted fix (-1 when lost).
+        quality: phase-correlation peak-to-noise ratio of that fix (0 when lost).
+    """
+
+    timestamp_ns: int
+    status: Status
+    pose: FloatArray
+    map_key: int
+    quality: float
+
+    @property
+    def localised(self) -> bool:
+        return self.status != "lost"
+
+
+@dataclass
+class _Fix:
+    """A verified match of a scan to a map keyframe."""
+
+    scan: int
+    keyframe: int
+    measurement: FloatArray  # T_scan_keyframe
+    covariance: FloatArray
+    quality: float
+    pose: FloatArray  # the scan's pose hypothesis T_map_scan
+
+
+@dataclass
+class _Node:
+    """A scan in the sliding window: its odometry from the previous node and its fix."""
+
+    scan: int
+    motion: FloatArray  # T_previous_node_scan (zeros for the first)
+    covariance: FloatArray
+    fix: _Fix
+    pose: FloatArray
+
+
+@dataclass
+class _State:
+    tracking: bool = False
+    anchor: FloatArray = field(default_factory=lambda: np.zeros(3))  # T_map_anchor_scan
+    since: FloatArray = field(default_factory=lambda: np.zeros(3))  # T_anchor_scan
+    since_cov: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
+    path_since_fix_m: float = 0.0
+    path_since_attempt_m: float = np.inf
+    pending: _Fix | None = None
+    pending_since: FloatArray = field(default_factory=lambda: np.zeros(3))
+    pending_cov: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
+    pending_path_m: float = 0.0
+    window: list[_Node] = field(default_factory=list)
+    last_fix: _Fix | None = None
+
+
+def descriptor_config_of(m: Map, fallback: DescriptorConfig) -> DescriptorConfig:
+    """The descriptor settings the map was made with (queries must use the same)."""
+    stored = m.settings.get("descriptor")
+    if not stored:
+        return fallback
+    try:
+        return merge(DescriptorConfig, fallback, stored, "map.json: settings.descriptor")
+    except ConfigError as exc:
+        raise MapError(str(exc)) from None
+
+
+def image_geometry_of(m: Map) -> ImageGeometry:
+    """The keyframe image geometry recorded in the map."""
+    try:
+        return merge(ImageGeometry, ImageGeometry(), m.settings.get("image", {}), "map.json")
+    except ConfigError as exc:
+        raise MapError(str(exc)) from None
+
+
+class MapKeyframes:
+    """A map's keyframes as the verifier sees them: ready-made scans (cached) and a place
+    database over all of them."""
+
+    def __init__(self, m: Map, config: PipelineConfig) -> None:
+        if len(m) == 0:
+            raise MapError("the map has no keyframes")
+        self.map = m
+        self.poses = m.poses
+        self.imager = KeyframeImager(image_geometry_of(m), config.odometry)
+        retrieval = dataclasses.replace(
+            config.loop_closure.raplace.retrieval, exclusion=ExclusionConfig(0, 0.0)
+        )
+        self.recognizer = PlaceRecognizer(retrieval)
+        self.recognizer.add_batch(
+            np.asarray(m.descriptors, dtype=np.float32), np.arange(len(m), dtype=np.int64)
+        )
+        self._scans: OrderedDict[int, RadarFrame] = OrderedDict()
+
+    def scan(self, index: int) -> KeyScan:
+        """Keyframe `index` as a `KeyScan` (key MAP_KEY_BASE + index, no twist: de-skewed)."""
+        frame = self._scans.get(index)
+        if frame is None:
+            row = self.map.keyframes[index]
+            frame = self.imager.pseudo_scan(self.map.images[index], int(row["timestamp_ns"]))
+            self._scans[index] = frame
+            if len(self._scans) > IMAGE_CACHE_SIZE:
+                self._scans.popitem(last=False)
+        else:
+            self._scans.move_to_end(index)
+        return KeyScan(MAP_KEY_BASE + index, frame.timestamp_ns, frame, None)
+
+    def near(self, pose: FloatArray, radius_m: float, count: int) -> list[int]:
+        """Up to `count` keyframes within `radius_m` of `pose`, nearest first."""
+        d = np.hypot(*(self.poses[:, :2] - pose[:2]).T)
+        order = np.argsort(d, kind="stable")[:count]
+        return [int(k) for k in order if d[k] <= radius_m]
+
+
+class Localizer:
+    """Places each scan of a sequence in a map's frame (see the module docstring).
+
+    Args:
+        m: the map.
+        config: settings; uses its `odometry`, `loop_closure` (verification) and
+            `maps.localization` sections.
+    """
+
+    def __init__(self, m: Map, config: PipelineConfig) -> None:
+        self.config = config
+        self.cfg = config.maps.localization
+        self.keyframes = MapKeyframes(m, config)
+        self.describe = DescriptorExtractor(
+            descriptor_config_of(m, config.loop_closure.raplace.descriptor)
+        )
+        self.odometry = Odometry(config.odometry)
+        self.verifier = GeometricVerifier(config.loop_closure)
+        self.state = _State()
+        self.global_attempts = 0
+        self.relocalisations = 0
+
+    # -- the per-scan step ------------------------------------------------------------------
+    def localize(self, frame: Scan) -> Localization:
+        """Register the next scan (time order) and place it in the map."""
+        result = self.odometry.register(frame)
+        self._advance(result)
+        query = KeyScan(result.index, result.timestamp_ns, frame, self._twist(result))
+        state = self.state
+        status: Status = "lost"
+        if state.tracking:
+            status = self._track(query)
+        if not state.tracking:
+            status = "relocalised" if self._relocalise(query) else "lost"
+        if status == "lost":
+            return Localization(result.timestamp_ns, "lost", np.full(3, np.nan), -1, 0.0)
+        fix = state.last_fix
+        assert fix is not None
+        pose = compose(state.anchor, state.since)
+        return Localization(result.timestamp_ns, status, pose, fix.keyframe, fix.quality)
+
+    # -- odometry bookkeeping ---------------------------------------------------------------
+    def _twist(self, result: OdometryResult) -> FloatArray | None:
+        results = self.odometry.results
+        if result.index == 0 or len(results) < 2:
+            return None
+        dt_s = (result.timestamp_ns - results[-2].timestamp_ns) / NS_PER_S
+        return twist_from_motion(result.motion, dt_s) if dt_s > 0 else None
+
+    def _advance(self, result: OdometryResult) -> None:
+        state = self.state
+        if result.index == 0:
+            return
+        motion = result.motion
+        step = float(np.hypot(motion[0], motion[1]))
+        step_cov = rotate_covariance(result.covariance, float(motion[2]))
+        state.since_cov = rotate_covariance(state.since_cov, float(motion[2])) + step_cov
+        state.pending_cov = rotate_covariance(state.pending_cov, float(motion[2])) + step_cov
+        state.since = compose(state.since, motion)
+        state.pending_since = compose(state.pending_since, motion)
+        state.path_since_fix_m += step
+        state.path_since_attempt_m += step
+        state.pending_path_m += step
+
+    # -- global relocalisation --------------------------------------------------------------
+    def _relocalise(self, query: KeyScan) -> bool:
+        cfg, state = self.cfg, self.state
+        if state.pending is not None and state.pending_path_m > cfg.lost_after_m:
+            state.pending = None
+        if state.path_since_attempt_m < cfg.relocalise_every_m:
+            return False
+        state.path_since_attempt_m = 0.0
+        self.global_attempts += 1
+        s = query.scan
+        descriptor = self.describe(s.polar, s.azimuths_rad, s.range_resolution_m)
+        candidates = [
+            c.key
+            for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)
+            if c.distance < cfg.max_descriptor_distance
+        ]
+        fix = self._first_verified(query, candidates, prediction=None)
+        if fix is None:
+            return False
+        pending = state.pending
+        if pending is None or state.pending_path_m < cfg.relocalise_every_m:
+            if pending is None:
+                self._hold(fix)
+            return False
+        carried = compose(pending.pose, state.pending_since)
+        if not self._agrees(carried, fix.pose, cfg.confirm_max_error_m, cfg.confirm_max_error_deg):
+            self._hold(fix)  # the newer hypothesis replaces the older
+            return False
+        self._start_tracking(pending, fix)
+        self.relocalisations += 1
+        return True
+
+    def _hold(self, fix: _Fix) -> None:
+        state = self.state
+        state.pending = fix
+        state.pending_since = np.zeros(3)
+        state.pending_cov = np.zeros((3, 3))
+        state.pending_path_m = 0.0
+
+    def _start_tracking(self, first: _Fix, second: _Fix) -> None:
+        state = self.state
+        motion, covariance = state.pending_since, state.pending_cov
+        first_node = _Node(first.scan, np.zeros(3), np.zeros((3, 3)), first, first.pose)
+        state.window = [first_node]
+        state.pending = None
+        state.tracking = True
+        self._add_node(second, motion, covariance)
+
+    # -- tracking -----------------------------------------------------------------------------
+    def _track(self, query: KeyScan) -> Status:
+        cfg, state = self.cfg, self.state
+        if state.path_since_attempt_m >= cfg.fix_every_m:
+            state.path_since_attempt_m = 0.0
+            predicted = compose(state.anchor, state.since)
+            near = self.keyframes.near(predicted, cfg.search_radius_m, cfg.fix_keyframes)
+            fix = self._first_verified(query, near, prediction=predicted)
+            if fix is not None:
+                self._add_node(fix, state.since, state.since_cov)
+        if state.path_since_fix_m > cfg.lost_after_m:
+            log.info("scan %d: no map fix for %.0f m: lost", query.key, state.path_since_fix_m)
+            state.tracking = False
+            state.window = []
+            state.path_since_attempt_m = np.inf
+            return "lost"
+        return "tracked"
+
+    def _add_node(self, fix: _Fix, motion: FloatArray, covariance: FloatArray) -> None:
+        """Append the fix's scan to the window, re-solve it, re-anchor the prediction."""
+        state = self.state
+        state.window.append(_Node(fix.scan, motion.copy(), covariance.copy(), fix, fix.pose))
+        state.window = state.window[-self.cfg.window_fixes :]
+        try:
+            fused = self._solve_window()
+        except GraphError as exc:  # keep the fix's own pose rather than stop
+            log.warning("window graph failed (%s): using the fix alone", exc)
+            fused = fix.pose
+        state.anchor = fused
+        state.since = np.zeros(3)
+        state.since_cov = np.zeros((3, 3))
+        state.path_since_fix_m = 0.0
+        state.last_fix = fix
+
+    def _solve_window(self) -> FloatArray:
+        """The window graph's estimate of the newest node (T_map_scan)."""
+        cfg = self.cfg
+        graph = PoseGraph(_WINDOW_GRAPH)
+        prior = np.diag(
+            [cfg.map_sigma_xy_m**2, cfg.map_sigma_xy_m**2, np.deg2rad(cfg.map_sigma_yaw_deg) ** 2]
+        )
+        added: set[int] = set()
+        previous: _Node | None = None
+        for node in self.state.window:
+            guess = node.pose if previous is None else compose(previous.pose, node.motion)
+            graph.add_keyframe(node.scan, guess)
+            if previous is not None:
+                graph.add_odometry(previous.scan, node.scan, node.motion, node.covariance)
+            kf = node.fix.keyframe
+            if kf not in added:
+                graph.add_keyframe(MAP_KEY_BASE + kf, self.keyframes.poses[kf])
+                graph.add_prior(MAP_KEY_BASE + kf, self.keyframes.poses[kf], prior)
+                added.add(kf)
+            graph.add_loop(node.scan, MAP_KEY_BASE + kf, node.fix.measurement, node.fix.covariance)
+            previous = node
+        graph.update()
+        graph.optimize_final()
+        for node in self.state.window:
+            node.pose = graph.estimate(node.scan)
+        return self.state.window[-1].pose
+
+    # -- verification -------------------------------------------------------------------------
+    def _first_verified(
+        self, query: KeyScan, keyframes: list[int], prediction: FloatArray | None
+    ) -> _Fix | None:
+        """The first keyframe that verifies (and agrees with `prediction` when given)."""
+        cfg = self.cfg
+        for kf in keyframes:
+            result: Verification = self.verifier(query, self.keyframes.scan(kf))
+            if not result.ok:
+                continue
+            pose = compose(self.keyframes.poses[kf], inverse(result.measurement))
+            if prediction is not None and not self._agrees(
+                prediction, pose, cfg.max_innovation_m, cfg.max_innovation_deg
+            ):
+                log.debug("scan %d: fix to keyframe %d off the prediction", query.key, kf)
+                continue
+            return _Fix(
+                query.key, kf, result.measurement, result.covariance, result.refined_quality, pose
+            )
+        return None
+
+    @staticmethod
+    def _agrees(a: FloatArray, b: FloatArray, max_m: float, max_deg: float) -> bool:
+        d = between(a, b)
+        return bool(
+            np.hypot(d[0], d[1]) <= max_m and abs(float(wrap_angle(d[2]))) <= np.deg2rad(max_deg)
+        )

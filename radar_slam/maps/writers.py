@@ -1,0 +1,180 @@
+"""Writers of `radar-slam localize` results and the `map info` text.
+
+A localisation result folder holds:
+
+    config.yaml        the settings used
+    localization.tum   the pose in the map frame of every localised scan (TUM)
+    localization.csv   one row per scan (LOCALIZATION_CSV_COLUMNS)
+    metrics.json       `LocalizationMetrics` (when the sequence and the map have GT)
+    summary.txt        a short human summary
+    localization.png   the map's keyframes with the localised trajectory, lost scans marked
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from radar_slam.maps.evaluate import LocalizationMetrics
+from radar_slam.maps.format import Map, map_bytes
+from radar_slam.maps.localizer import Localization
+from radar_slam.outputs import write_json
+from radar_slam.trajectory import Trajectory, write_tum
+
+log = logging.getLogger(__name__)
+
+LOCALIZATION_CSV_COLUMNS = ("scan_ns", "status", "map_key", "x", "y", "yaw", "quality")
+"""localization.csv header: scan time [ns], relocalised / tracked / lost, map keyframe index of
+the latest fix (-1 when lost), pose T_map_radar (x, y [m], yaw [rad], empty when lost), fix
+quality (phase-correlation peak-to-noise ratio, 0 when lost)."""
+TUM_FILE = "localization.tum"
+CSV_FILE = "localization.csv"
+PLOT_FILE = "localization.png"
+FIGURE_SIZE_IN = (8.0, 8.0)
+DPI = 120
+
+
+def localized_trajectory(fixes: Sequence[Localization]) -> Trajectory:
+    """The localised scans' poses T_map_radar at their timestamps."""
+    kept = [f for f in fixes if f.localised]
+    stamps = np.array([f.timestamp_ns for f in kept], dtype=np.int64)
+    return Trajectory(stamps, np.array([f.pose for f in kept], dtype=np.float64).reshape(-1, 3))
+
+
+def write_localization_csv(path: Path, fixes: Sequence[Localization]) -> None:
+    """localization.csv: one row per scan."""
+    with Path(path).open("w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(LOCALIZATION_CSV_COLUMNS)
+        for f in fixes:
+            pose = [repr(float(v)) for v in f.pose] if f.localised else ["", "", ""]
+            writer.writerow([f.timestamp_ns, f.status, f.map_key, *pose, f"{f.quality:.2f}"])
+
+
+def plot_localization(path: Path, m: Map, fixes: Sequence[Localization], title: str) -> None:
+    """Top view in the map frame: keyframes (grey dots), the localised trajectory, the
+    relocalisations (green circles), and lost scans (red crosses at the last localised
+    position: a lost scan has no pose)."""
+    figure = Figure(figsize=FIGURE_SIZE_IN, dpi=DPI)
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot()
+    poses = m.poses
+    axes.scatter(poses[:, 0], poses[:, 1], s=4, color="0.6", label=f"map keyframes ({len(m)})")
+    xy = np.array([f.pose[:2] if f.localised else (np.nan, np.nan) for f in fixes]).reshape(-1, 2)
+    axes.plot(xy[:, 0], xy[:, 1], linewidth=1.2, color="tab:blue", label="localised")
+    relocalised = np.array([f.status == "relocalised" for f in fixes], dtype=bool)
+    if relocalised.any():
+        axes.scatter(
+            xy[relocalised, 0],
+            xy[relocalised, 1],
+            marker="o",
+            s=40,
+            facecolors="none",
+            color="tab:green",
+            label="relocalised",
+        )
+    last = np.full(2, np.nan)
+    marks = []
+    for f in fixes:
+        if f.localised:
+            last = f.pose[:2]
+        elif np.all(np.isfinite(last)):
+            marks.append(last)
+    if marks:
+        axes.scatter(
+            np.array(marks)[:, 0],
+            np.array(marks)[:, 1],
+            marker="x",
+            s=30,
+            color="tab:red",
+            label=f"lost after localisation ({len(marks)} scans)",
+        )
+    axes.set_aspect("equal", adjustable="datalim")
+    axes.set_xlabel("x (map frame) [m]")
+    axes.set_ylabel("y (map frame) [m]")
+    axes.grid(True, linewidth=0.3)
+    axes.set_title(title)
+    axes.legend(loc="best")
+    figure.savefig(path, bbox_inches="tight")
+    log.info("wrote %s", path)
+
+
+def localization_summary(
+    sequence: str,
+    fixes: Sequence[Localization],
+    seconds: float,
+    metrics: LocalizationMetrics | None,
+) -> str:
+    """A few lines for humans."""
+    counts = {s: sum(f.status == s for f in fixes) for s in ("relocalised", "tracked", "lost")}
+    rate = len(fixes) / seconds if seconds > 0 else 0.0
+    lines = [
+        f"sequence      {sequence}: {len(fixes)} scans in {seconds:.1f} s ({rate:.1f} scans/s)",
+        f"status        {counts['relocalised']} relocalised, {counts['tracked']} tracked, "
+        f"{counts['lost']} lost",
+    ]
+    if metrics is None:
+        lines.append("accuracy      n/a (the sequence or the map has no ground truth)")
+    else:
+        correct = metrics.near_route_correct
+        lines += [
+            f"near route    {metrics.near_route_scans} scans within 10 m of the map's route, "
+            + ("n/a" if correct is None else f"{100 * correct:.1f} % localised within 1 m, 2 deg"),
+            f"errors        longitudinal {_m(metrics.longitudinal_rmse_m)}, lateral "
+            f"{_m(metrics.lateral_rmse_m)} RMS, max {_m(metrics.max_error_m)}; "
+            f"{metrics.wrong_localised} scans > 5 m off, "
+            f"{metrics.wrong_relocalisations} wrong relocalisations",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def _m(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.3f} m"
+
+
+def write_localization(
+    folder: Path,
+    sequence: str,
+    m: Map,
+    fixes: Sequence[Localization],
+    seconds: float,
+    metrics: LocalizationMetrics | None,
+) -> None:
+    """localization.tum/.csv/.png, summary.txt and (with metrics) metrics.json into `folder`."""
+    write_tum(folder / TUM_FILE, localized_trajectory(fixes))
+    write_localization_csv(folder / CSV_FILE, fixes)
+    if metrics is not None:
+        write_json(folder / "metrics.json", metrics.to_dict())
+    (folder / "summary.txt").write_text(localization_summary(sequence, fixes, seconds, metrics))
+    plot_localization(folder / PLOT_FILE, m, fixes, f"{sequence} localised in the map")
+
+
+def map_info(path: Path, m: Map) -> dict[str, Any]:
+    """`radar-slam map info` content: sessions, keyframes, extent, size, GT alignment."""
+    poses = m.poses
+    size = map_bytes(path)
+    lo = poses[:, :2].min(axis=0) if len(m) else np.zeros(2)
+    hi = poses[:, :2].max(axis=0) if len(m) else np.zeros(2)
+    sessions = []
+    for n, s in enumerate(m.sessions):
+        count = int(np.sum(m.keyframes["session"] == n))
+        sessions.append(f"{s.sequence} ({s.scans} scans, {count} keyframes, {s.joined})")
+    alignment = m.gt_alignment
+    return {
+        "sessions": sessions,
+        "keyframes": len(m),
+        "edges": len(m.edges),
+        "extent_m": [float(v) for v in (hi - lo)],
+        "bytes": size,
+        "bytes_per_keyframe": size / max(1, len(m)),
+        "gt_alignment": None
+        if alignment is None
+        else [float(alignment[0]), float(alignment[1]), float(np.rad2deg(alignment[2]))],
+    }

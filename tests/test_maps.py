@@ -1,0 +1,168 @@
+"""Maps: the on-disk format (round trip, integrity), keyframe images good enough to verify
+loops, `map info`, and a `run` writing map/. Built from `synthetic/tiny_loop` (reduced bins)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from odometry import OdometryConfig
+from odometry.se2 import between, wrap_angle
+from radar_slam.cli import main
+from radar_slam.datasets.frame import Sequence
+from radar_slam.loops import GeometricVerifier, KeyScan, LoopClosureConfig
+from radar_slam.maps import ImageGeometry, KeyframeImager, Map, MapError, build_map
+from radar_slam.maps.build import select_keyframes
+from radar_slam.maps.format import DATA_FILES, MANIFEST_FILE, encode_map
+from radar_slam.pipeline import Pipeline, Results, load_config
+
+MAP_FRAMES = 110
+"""Scans of tiny_loop that make the map (the first lap and a bit)."""
+
+
+@pytest.fixture(scope="module")
+def map_run(tiny_loop: Sequence) -> Results:
+    return Pipeline(tiny_loop, load_config("synthetic"), max_frames=MAP_FRAMES).run()
+
+
+@pytest.fixture(scope="module")
+def tiny_map(map_run: Results, tiny_loop: Sequence) -> Map:
+    return build_map(map_run, tiny_loop)
+
+
+@pytest.fixture(scope="module")
+def saved_map(tiny_map: Map, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("maps") / "map"
+    tiny_map.save(path)
+    return path
+
+
+def test_keyframes_every_spacing() -> None:
+    x = np.arange(0.0, 20.5, 0.5)
+    poses = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    np.testing.assert_array_equal(select_keyframes(poses, 4.0), [0, 8, 16, 24, 32, 40])
+
+
+def test_map_content(tiny_map: Map, map_run: Results) -> None:
+    cfg = map_run.config.maps
+    path = map_run.slam.length_m()
+    max_step = float(np.max(np.hypot(*np.diff(map_run.slam.positions, axis=0).T)))
+    assert path / (cfg.keyframe_spacing_m + max_step) <= len(tiny_map)
+    assert len(tiny_map) <= path / cfg.keyframe_spacing_m + 1
+    kf = tiny_map.keyframes
+    np.testing.assert_allclose(tiny_map.poses, map_run.slam.poses[kf["scan"]])
+    assert np.all(np.isfinite(tiny_map.gt_poses))
+    # The stored alignment takes the map's poses onto the ground truth (SLAM ATE is ~0.1 m).
+    assert tiny_map.gt_alignment is not None
+    from odometry.se2 import compose
+
+    placed = compose(tiny_map.gt_alignment, tiny_map.poses)
+    assert np.max(np.hypot(*(placed[:, :2] - tiny_map.gt_poses[:, :2]).T)) < 1.0
+    # A chain of odometry edges plus the accepted loops moved onto keyframes.
+    odometry_edges = tiny_map.edges[tiny_map.edges["kind"] == 0]
+    assert len(odometry_edges) == len(tiny_map) - 1
+    assert tiny_map.sessions[0].sequence == "synthetic/tiny_loop"
+    assert tiny_map.sessions[0].scans == MAP_FRAMES
+
+
+def test_round_trip_is_byte_identical(saved_map: Path, tmp_path: Path) -> None:
+    loaded = Map.load(saved_map)
+    again = tmp_path / "again"
+    loaded.save(again)
+    for name in (MANIFEST_FILE, *DATA_FILES):
+        assert (again / name).read_bytes() == (saved_map / name).read_bytes(), name
+    assert encode_map(Map.load(again)) == encode_map(loaded)
+    with pytest.raises(MapError, match="exists already"):
+        loaded.save(again)
+
+
+def test_compact(saved_map: Path, tiny_map: Map) -> None:
+    size = sum(f.stat().st_size for f in saved_map.iterdir())
+    assert size / len(tiny_map) < 40_000  # bytes per keyframe: no polar scans inside
+
+
+def _one_line_error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    return err
+
+
+def test_damaged_and_foreign_maps_give_one_line(
+    saved_map: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    for f in saved_map.iterdir():
+        (damaged / f.name).write_bytes(f.read_bytes())
+    blob = bytearray((damaged / "images.bin").read_bytes())
+    blob[len(blob) // 2] ^= 0xFF
+    (damaged / "images.bin").write_bytes(bytes(blob))
+    err = _one_line_error(capsys, ["map", "info", str(damaged)])
+    assert "images.bin is damaged" in err and str(damaged) in err
+
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("hello")
+    assert "not a radar-slam map" in _one_line_error(capsys, ["map", "info", str(foreign)])
+
+    newer = tmp_path / "newer"
+    newer.mkdir()
+    for f in saved_map.iterdir():
+        (newer / f.name).write_bytes(f.read_bytes())
+    manifest = json.loads((newer / MANIFEST_FILE).read_text())
+    manifest["version"] = 99
+    (newer / MANIFEST_FILE).write_text(json.dumps(manifest))
+    assert "version 99" in _one_line_error(capsys, ["map", "info", str(newer)])
+
+    missing = tmp_path / "missing"
+    missing.mkdir()
+    for f in saved_map.iterdir():
+        if f.name != "edges.npy":
+            (missing / f.name).write_bytes(f.read_bytes())
+    assert "edges.npy is missing" in _one_line_error(capsys, ["map", "info", str(missing)])
+
+
+def test_map_info(saved_map: Path, tiny_map: Map, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["map", "info", str(saved_map), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["keyframes"] == len(tiny_map)
+    assert info["sessions"][0].startswith("synthetic/tiny_loop")
+    assert info["gt_alignment"] is not None
+    assert main(["map", "info", str(saved_map)]) == 0
+    assert "GT alignment" in capsys.readouterr().out
+
+
+def test_keyframe_image_verifies_like_the_scan(tiny_loop: Sequence) -> None:
+    """A loop verified against a keyframe's stored image (made back into a scan) recovers the
+    ground-truth relative pose as well as one against the scan itself."""
+    imager = KeyframeImager(ImageGeometry(), OdometryConfig())
+    verifier = GeometricVerifier(LoopClosureConfig())
+    gt = np.asarray(tiny_loop.ground_truth)
+    query = 150  # on the revisit: its nearest scan of the first lap is the match
+    match = int(np.argmin(np.hypot(*(gt[:80, :2] - gt[query, :2]).T)))
+    assert 0.5 < np.hypot(*(gt[query, :2] - gt[match, :2])) < 5.0
+    png, _ = imager.encode(imager.image(tiny_loop[match], None))
+    pseudo = imager.pseudo_scan(png, tiny_loop[match].timestamp_ns)
+    result = verifier(
+        KeyScan(query, pseudo.timestamp_ns, tiny_loop[query]),
+        KeyScan(10_000, pseudo.timestamp_ns, pseudo),
+    )
+    assert result.ok, result.reason
+    error = between(between(gt[query], gt[match]), result.measurement)
+    assert np.hypot(error[0], error[1]) < 0.5
+    assert abs(np.rad2deg(wrap_angle(error[2]))) < 1.0
+
+
+def test_run_writes_a_map(synthetic_root: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    argv = ["run", "synthetic/tiny", "--data-root", str(synthetic_root), "--out", str(out)]
+    assert main([*argv, "--max-frames", "30"]) == 0
+    m = Map.load(out / "map")
+    assert m.sessions[0].scans == 30
+    assert len(m) >= 3
+    assert dataclasses.asdict(ImageGeometry()) == m.settings["image"]

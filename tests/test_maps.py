@@ -3,6 +3,7 @@ loops, `map info`, and a `run` writing map/. Built from `synthetic/tiny_loop` (r
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 from pathlib import Path
@@ -17,8 +18,12 @@ from radar_slam.datasets.frame import Sequence
 from radar_slam.loops import GeometricVerifier, KeyScan, LoopClosureConfig
 from radar_slam.maps import ImageGeometry, KeyframeImager, Map, MapError, build_map
 from radar_slam.maps.build import select_keyframes
+from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import DATA_FILES, MANIFEST_FILE, encode_map
+from radar_slam.maps.localizer import Localizer
+from radar_slam.maps.writers import LOCALIZATION_CSV_COLUMNS
 from radar_slam.pipeline import Pipeline, Results, load_config
+from radar_slam.trajectory import read_tum
 
 MAP_FRAMES = 110
 """Scans of tiny_loop that make the map (the first lap and a bit)."""
@@ -166,3 +171,42 @@ def test_run_writes_a_map(synthetic_root: Path, tmp_path: Path) -> None:
     assert m.sessions[0].scans == 30
     assert len(m) >= 3
     assert dataclasses.asdict(ImageGeometry()) == m.settings["image"]
+
+
+def test_localize_the_revisit_in_the_map(tiny_map: Map, tiny_loop: Sequence) -> None:
+    """The scans after the map's end drive its streets again: once relocalised, every scan near
+    the map is placed within 1 m and 2 deg of GT (through the map's own GT alignment)."""
+    localizer = Localizer(tiny_map, load_config("synthetic"))
+    fixes = [localizer.localize(tiny_loop[n]) for n in range(MAP_FRAMES, len(tiny_loop))]
+    gt = np.asarray(tiny_loop.ground_truth)[MAP_FRAMES:]
+    metrics = evaluate_localization(fixes, gt, tiny_map)
+    assert metrics is not None
+    assert metrics.relocalisations >= 1
+    assert metrics.wrong_localised == 0
+    assert metrics.near_route_correct is not None and metrics.near_route_correct >= 0.85
+    assert metrics.max_error_m is not None and metrics.max_error_m < 2.0
+
+
+def test_localize_command(
+    saved_map: Path, synthetic_root: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "loc"
+    argv = ["localize", "synthetic/tiny_loop", "--map", str(saved_map), "--out", str(out)]
+    assert main([*argv, "--data-root", str(synthetic_root), "--max-frames", "40"]) == 0
+    with (out / "localization.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert tuple(rows[0]) == LOCALIZATION_CSV_COLUMNS and len(rows) == 40
+    assert {r["status"] for r in rows} <= {"relocalised", "tracked", "lost"}
+    localised = [r for r in rows if r["status"] != "lost"]
+    assert len(localised) >= 20  # the map was built from these very scans
+    assert len(read_tum(out / "localization.tum")) == len(localised)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["wrong_localised"] == 0 and metrics["scans"] == 40
+    assert (out / "localization.png").is_file()
+    assert "localised within 1 m" in capsys.readouterr().out
+    # A damaged map stops before any work.
+    (saved_map.parent / "broken").mkdir()
+    err = _one_line_error(
+        capsys, ["localize", "synthetic/tiny", "--map", str(saved_map.parent / "broken")]
+    )
+    assert "not a radar-slam map" in err

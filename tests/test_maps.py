@@ -14,6 +14,7 @@ import pytest
 from odometry import OdometryConfig
 from odometry.se2 import between, wrap_angle
 from radar_slam.cli import main
+from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import Sequence
 from radar_slam.loops import GeometricVerifier, KeyScan, LoopClosureConfig
 from radar_slam.maps import ImageGeometry, KeyframeImager, Map, MapError, build_map
@@ -21,6 +22,7 @@ from radar_slam.maps.build import select_keyframes
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import DATA_FILES, MANIFEST_FILE, encode_map
 from radar_slam.maps.localizer import Localizer
+from radar_slam.maps.session import join_session
 from radar_slam.maps.writers import LOCALIZATION_CSV_COLUMNS
 from radar_slam.pipeline import Pipeline, Results, load_config
 from radar_slam.trajectory import read_tum
@@ -210,3 +212,73 @@ def test_localize_command(
         capsys, ["localize", "synthetic/tiny", "--map", str(saved_map.parent / "broken")]
     )
     assert "not a radar-slam map" in err
+
+
+@pytest.fixture(scope="module")
+def reverse_pair(synthetic_root: Path) -> tuple[Sequence, Sequence]:
+    """`synthetic/tiny_reverse_a` and `_b`: one block driven one way, then the other way round
+    in the other lane in another session (reduced bins)."""
+    return (
+        open_sequence("synthetic/tiny_reverse_a", synthetic_root),
+        open_sequence("synthetic/tiny_reverse_b", synthetic_root),
+    )
+
+
+@pytest.fixture(scope="module")
+def reverse_map(reverse_pair: tuple[Sequence, Sequence]) -> Map:
+    a = reverse_pair[0]
+    return build_map(Pipeline(a, load_config("synthetic")).run(), a)
+
+
+def test_reverse_session_localised_in_the_map(
+    reverse_map: Map, reverse_pair: tuple[Sequence, Sequence]
+) -> None:
+    """Driving the map's street the other way round: relocalised (the 180-degree case) and
+    tracked within 1 m and 2 deg of GT, through the map's own GT alignment."""
+    b = reverse_pair[1]
+    localizer = Localizer(reverse_map, load_config("synthetic"))
+    fixes = [localizer.localize(b[n]) for n in range(len(b))]
+    metrics = evaluate_localization(fixes, np.asarray(b.ground_truth), reverse_map)
+    assert metrics is not None and metrics.relocalisations >= 1
+    assert metrics.near_route_correct is not None and metrics.near_route_correct >= 0.8
+    assert metrics.wrong_localised == 0
+
+
+def test_reverse_session_joins_the_map(
+    reverse_map: Map, reverse_pair: tuple[Sequence, Sequence], tmp_path: Path
+) -> None:
+    """The reverse session is tied to the map by verified inter-session loops, all true, and
+    lands in the map's frame within 1 m ATE without re-alignment."""
+    b = reverse_pair[1]
+    run = Pipeline(b, load_config("synthetic")).run()
+    joined = join_session(run, b, reverse_map)
+    assert joined.met_map
+    accepted = [n for n, d in enumerate(joined.loops) if d.accepted]
+    assert len(accepted) >= 2
+    assert all(joined.true_loops[n] for n in accepted)
+    assert joined.ate_map_frame_m is not None and joined.ate_map_frame_m < 1.0
+    yaw = [abs(wrap_angle(d.measurement[2])) for d in joined.accepted]
+    assert max(yaw) > np.deg2rad(150)  # loops across the opposite direction
+    extended = joined.map
+    assert [s.joined for s in extended.sessions] == ["origin", "loops"]
+    assert len(extended) > len(reverse_map)
+    assert np.sum(extended.edges["kind"] == 2) == len(accepted)
+    # The extended map round-trips and serves a third session.
+    extended.save(tmp_path / "two")
+    again = Map.load(tmp_path / "two")
+    assert encode_map(again) == encode_map(extended)
+    assert len(again.sessions) == 2
+
+
+def test_a_session_elsewhere_never_meets_the_map(tiny: Sequence, oxford_dir: Path) -> None:
+    """A map of a real Oxford street and a simulated town: no inter-session loop is accepted,
+    and the session is reported as such (its trajectory stays in its own frame)."""
+    oxford = open_sequence(str(oxford_dir))
+    config = load_config("synthetic")
+    oxford_map = build_map(Pipeline(oxford, load_config("oxford")).run(), oxford)
+    run = Pipeline(tiny, config, max_frames=30).run()
+    joined = join_session(run, tiny, oxford_map)
+    assert not joined.met_map
+    assert not any(d.accepted for d in joined.loops)
+    np.testing.assert_allclose(joined.results.slam.poses, run.slam.poses)
+    assert [s.sequence for s in joined.map.sessions] == [run.sequence]

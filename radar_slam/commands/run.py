@@ -18,7 +18,9 @@ from tqdm import tqdm
 from radar_slam.commands.data import DATA_ROOT_OPTION
 from radar_slam.errors import ResultsError
 from radar_slam.maps.build import build_map  # issue-13: every run writes map/
-from radar_slam.maps.format import write_map  # issue-13
+from radar_slam.maps.format import Map, write_map  # issue-13
+from radar_slam.maps.session import join_session  # issue-13: run --map
+from radar_slam.maps.writers import write_joined  # issue-13
 from radar_slam.outputs import (
     odometry_summary,
     slam_summary,
@@ -53,6 +55,12 @@ CONFIG_OPTION = typer.Option(
     help="YAML overrides applied on top of the defaults and configs/<family>.yaml.",
     exists=True,
     dir_okay=False,
+)
+MAP_OPTION = typer.Option(
+    None,
+    "--map",
+    help="Extend this map (a run's map/): multi-session SLAM in the map's frame (issue-13).",
+    file_okay=False,
 )
 MAX_FRAMES_OPTION = typer.Option(
     None, "--max-frames", min=1, help="Process only the first N scans."
@@ -95,19 +103,25 @@ def run_command(
         False, "--no-loops", help="Odometry and pose graph only, no loop closing."
     ),
     data_root: Path | None = DATA_ROOT_OPTION,
+    map_path: Path | None = MAP_OPTION,  # issue-13
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
     check_out(out)
+    prior_map = None if map_path is None else Map.load(map_path)  # issue-13
     seq, settings = open_configured(sequence, data_root, config)
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}") as update:
         results = Pipeline(seq, settings, max_frames=max_frames, progress=update).run()
+    joined = None if prior_map is None else join_session(results, seq, prior_map)  # issue-13
+    results = results if joined is None else joined.results  # issue-13: in the map's frame
     folder = result_dir(seq.family, seq.name, out)
     write_results(folder, results)
-    write_map(folder / MAP_FOLDER, build_map(results, seq))  # issue-13
+    write_map(folder / MAP_FOLDER, build_map(results, seq) if joined is None else joined.map)
     typer.echo(slam_summary(results), nl=False)
+    if joined is not None:  # issue-13
+        typer.echo(write_joined(folder, joined), nl=False)
     typer.echo(f"results in {folder}")
 
 

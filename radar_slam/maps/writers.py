@@ -8,6 +8,9 @@ A localisation result folder holds:
     metrics.json       `LocalizationMetrics` (when the sequence and the map have GT)
     summary.txt        a short human summary
     localization.png   the map's keyframes with the localised trajectory, lost scans marked
+
+`radar-slam run SEQ --map MAP` adds intersession_loops.csv and multisession.json to the SLAM
+result folder (its slam.tum/.kitti are then in MAP's frame).
 """
 
 from __future__ import annotations
@@ -25,7 +28,9 @@ from matplotlib.figure import Figure
 from radar_slam.maps.evaluate import LocalizationMetrics
 from radar_slam.maps.format import Map, map_bytes
 from radar_slam.maps.localizer import Localization
-from radar_slam.outputs import write_json
+from radar_slam.maps.session import JoinedSession
+from radar_slam.maps.session import summary as joined_summary
+from radar_slam.outputs import write_json, write_loops_csv
 from radar_slam.trajectory import Trajectory, write_tum
 
 log = logging.getLogger(__name__)
@@ -37,6 +42,10 @@ quality (phase-correlation peak-to-noise ratio, 0 when lost)."""
 TUM_FILE = "localization.tum"
 CSV_FILE = "localization.csv"
 PLOT_FILE = "localization.png"
+INTERSESSION_LOOPS_FILE = "intersession_loops.csv"
+"""`run --map`: the inter-session loop proposals (loops.csv columns; match = map keyframe)."""
+MULTISESSION_FILE = "multisession.json"
+"""`run --map`: met_map, inter-session loops proposed/accepted/true, ATE in the map frame."""
 FIGURE_SIZE_IN = (8.0, 8.0)
 DPI = 120
 
@@ -178,3 +187,26 @@ def map_info(path: Path, m: Map) -> dict[str, Any]:
         if alignment is None
         else [float(alignment[0]), float(alignment[1]), float(np.rad2deg(alignment[2]))],
     }
+
+
+def write_joined(folder: Path, joined: JoinedSession) -> str:
+    """intersession_loops.csv and multisession.json of `run --map`; returns summary lines."""
+    write_loops_csv(folder / INTERSESSION_LOOPS_FILE, joined.loops, joined.true_loops)
+    content = joined_summary(joined)
+    write_json(folder / MULTISESSION_FILE, content)
+    if not joined.met_map:
+        text = (
+            f"map           never met the map: {content['intersession_proposed']} inter-session "
+            "proposals, none accepted; trajectory and map/ in the session's own frame\n"
+        )
+    else:
+        true = content["intersession_accepted_true"]
+        ate = content["ate_map_frame_m"]
+        text = (
+            f"map           joined by {content['intersession_accepted']} inter-session loops "
+            f"({'n/a' if true is None else true} true) of {content['intersession_proposed']}; "
+            f"trajectory in the map frame, ATE {_m(ate)} through the map's GT alignment; "
+            f"map/ holds {content['map_sessions']} sessions\n"
+        )
+    (folder / "summary.txt").write_text((folder / "summary.txt").read_text() + text)
+    return text

@@ -12,6 +12,9 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 | multisession_a | session A of a town shared with multisession_b | 351 | 0.9 km |
 | multisession_b | another route sharing streets; cars, vegetation, traffic changed | 522 | 1.2 km |
 | long | three loops, revisits in both directions: benchmarks | 1588 | 4.2 km |
+| multisession_reverse_a | a loop around blocks: map session of a reverse pair | 359 | 0.9 km |
+| multisession_reverse_b | the same streets the other way, other lane, next day | 358 | 0.9 km |
+| tiny_reverse_a, _b | tiny's block one way, then the other way (session 1): CI | 90 | 165 m |
 """
 
 from __future__ import annotations
@@ -37,6 +40,8 @@ TINY_BINS = 1024
 _TINY_SENSOR = SensorConfig(n_bins=TINY_BINS)
 _TINY_TOWN = TownConfig(n_blocks=(3, 3), block_size_m=(60.0, 90.0))
 """Sensor and town of the `tiny` and `tiny_loop` scenarios."""
+TINY_REVERSE_FRAMES = 90
+"""Scans of `tiny_reverse_a` and `_b` (issue-13)."""
 
 
 @dataclass(frozen=True)
@@ -126,6 +131,12 @@ _MULTI_B: Waypoints = (
     (4, 4),
     (4, 3),
 )
+_REVERSE_SESSION_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (2, 1))
+"""A loop around blocks of the town, driven anticlockwise (issue-13: map session)."""
+_REVERSE_SESSION_B: Waypoints = tuple(reversed(_REVERSE_SESSION_A))
+"""The same streets clockwise: every street the other way, in the other lane."""
+_TINY_BLOCK: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2), (1, 1))
+"""Once around one block of the tiny town (issue-13: map tests)."""
 _LONG_ROUTE: Waypoints = (
     (1, 1),
     (4, 1),
@@ -215,11 +226,56 @@ SCENARIOS: dict[str, Scenario] = {
             start_ns=EPOCH_NS + 6 * DAY_NS,
             town=TownConfig(n_blocks=(8, 7)),
         ),
+        Scenario(  # issue-13: a reverse-direction session pair for maps
+            name="multisession_reverse_a",
+            description="the map session of a reverse pair: a loop around town blocks",
+            seed=13,
+            waypoints=_REVERSE_SESSION_A,
+            town_routes=(_REVERSE_SESSION_A,),
+            session=0,
+            start_ns=EPOCH_NS + 7 * DAY_NS,
+        ),
+        Scenario(  # issue-13
+            name="multisession_reverse_b",
+            description="the same streets the other way round, in the other lane, a day later; "
+            "parked cars, vegetation and traffic changed",
+            seed=13,
+            waypoints=_REVERSE_SESSION_B,
+            town_routes=(_REVERSE_SESSION_A,),
+            session=1,
+            start_ns=EPOCH_NS + 8 * DAY_NS,
+        ),
+        Scenario(  # issue-13: the reverse pair at reduced bins, for CI
+            name="tiny_reverse_a",
+            description="once around a block of the tiny town, reduced bins: map tests",
+            seed=11,
+            waypoints=_TINY_BLOCK,
+            town_routes=(_TINY_BLOCK,),
+            max_frames=TINY_REVERSE_FRAMES,
+            start_ns=EPOCH_NS + 9 * DAY_NS,
+            sensor=_TINY_SENSOR,
+            town=_TINY_TOWN,
+        ),
+        Scenario(  # issue-13
+            name="tiny_reverse_b",
+            description="the same block the other way round, other lane, another session",
+            seed=11,
+            waypoints=tuple(reversed(_TINY_BLOCK)),
+            town_routes=(_TINY_BLOCK,),
+            session=1,
+            max_frames=TINY_REVERSE_FRAMES,
+            start_ns=EPOCH_NS + 10 * DAY_NS,
+            sensor=_TINY_SENSOR,
+            town=_TINY_TOWN,
+        ),
     )
 }
 """Every scenario by name."""
 
-GROUPS: dict[str, tuple[str, ...]] = {"multisession": ("multisession_a", "multisession_b")}
+GROUPS: dict[str, tuple[str, ...]] = {
+    "multisession": ("multisession_a", "multisession_b"),
+    "multisession_reverse": ("multisession_reverse_a", "multisession_reverse_b"),  # issue-13
+}
 """Names that stand for several sequences generated together."""
 
 DEFAULT_SCENARIO = "loop"

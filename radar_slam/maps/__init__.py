@@ -1,27 +1,51 @@
 """Maps that last: save a SLAM run as a map, relocalise in it, extend it with new sessions.
 
-    from radar_slam.maps import Map, Localizer
+    from radar_slam.maps import Localizer, Map
     m = Map.load("results/synthetic_multisession_a/latest/map")
     localizer = Localizer(m, config)
     for frame in sequence: fix = localizer.localize(frame)
 
-The on-disk format is specified in docs/map_format.md.
+The on-disk format is specified in docs/map_format.md. The map I/O (`format`, `images`,
+`config`) does not import GTSAM; the names built on the pose graph (`build_map`, `Localizer`,
+`join_session`) are imported on first use (PEP 562), so `import radar_slam.maps` stays light.
 """
 
-from radar_slam.maps.build import build_map
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
 from radar_slam.maps.config import LocalizerConfig, MapsConfig
 from radar_slam.maps.format import Map, MapError, Session, read_map, write_map
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
 
+_LAZY = {
+    "build_map": "radar_slam.maps.build",
+    "Localization": "radar_slam.maps.localizer",
+    "Localizer": "radar_slam.maps.localizer",
+    "JoinedSession": "radar_slam.maps.session",
+    "join_session": "radar_slam.maps.session",
+}
+
 __all__ = [
     "ImageGeometry",
+    "JoinedSession",
     "KeyframeImager",
+    "Localization",
+    "Localizer",
     "LocalizerConfig",
     "Map",
     "MapError",
     "MapsConfig",
     "Session",
     "build_map",
+    "join_session",
     "read_map",
     "write_map",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -31,9 +31,9 @@ class LocalizerConfig:
         map_sigma_yaw_deg: the same for their rotation [deg].
     """
 
-    candidates: int = 3
+    candidates: int = 2
     max_descriptor_distance: float = 0.25
-    relocalise_every_m: float = 2.0
+    relocalise_every_m: float = 4.0
     confirm_max_error_m: float = 1.5
     confirm_max_error_deg: float = 3.0
     fix_every_m: float = 6.0

@@ -9,8 +9,10 @@
   T_map_scan = T_map_keyframe * z^-1; it is only believed once a second hypothesis, at least
   `relocalise_every_m` later, agrees with the first carried forward by the odometry
   (`confirm_max_error_m/_deg`): a single wrong match never places the vehicle.
-- **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is verified against
-  the nearest map keyframes to the prediction (within `search_radius_m`). A fix that agrees with
+- **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is registered by
+  phase correlation (`odometry.registration`, the loop verifier's refinement stage, with the
+  predicted relative yaw in place of its sinogram stage) against the nearest map keyframes to
+  the prediction (within `search_radius_m`). A fix with a strong peak that agrees with
   the prediction (`max_innovation_m/_deg`) enters a small pose graph (`radar_slam.graph`): the
   scans of the latest `window_fixes` fixes joined by the odometry between them, each fix a loop
   factor (robust kernel) to its keyframe, the keyframes held by tight priors at their map poses.
@@ -32,12 +34,21 @@ from numpy.typing import NDArray
 
 from odometry import Odometry, OdometryResult, Scan
 from odometry.deskew import twist_from_motion
+from odometry.registration import PreparedScan, prepare, register
 from odometry.se2 import between, compose, inverse, wrap_angle
 from radar_slam.config import merge
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.errors import ConfigError, GraphError
 from radar_slam.graph import GraphConfig, PoseGraph
-from radar_slam.loops import GeometricVerifier, KeyScan, Verification, rotate_covariance
+from radar_slam.loops import (
+    GeometricVerifier,
+    KeyScan,
+    Verification,
+    loop_covariance,
+    rotate_covariance,
+    turned,
+)
+from radar_slam.maps.build import NS_PER_S
 from radar_slam.maps.format import Map, MapError
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
 from raplace.config import DescriptorConfig, ExclusionConfig
@@ -51,7 +62,6 @@ log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 Status = Literal["relocalised", "tracked", "lost"]
-NS_PER_S = 1e9
 MAP_KEY_BASE = 1 << 40
 """Graph keys of map keyframes in the window graph (scan keys are scan indices)."""
 IMAGE_CACHE_SIZE = 64
@@ -198,6 +208,8 @@ class Localizer:
         self.odometry = Odometry(config.odometry)
         self.verifier = GeometricVerifier(config.loop_closure)
         self.state = _State()
+        self._prepared: PreparedScan | None = None
+        self._prepared_key: int | None = None
         self.global_attempts = 0
         self.relocalisations = 0
 
@@ -259,7 +271,7 @@ class Localizer:
             for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)
             if c.distance < cfg.max_descriptor_distance
         ]
-        fix = self._first_verified(query, candidates, prediction=None)
+        fix = self._first_verified(query, candidates)
         if fix is None:
             return False
         pending = state.pending
@@ -298,7 +310,10 @@ class Localizer:
             state.path_since_attempt_m = 0.0
             predicted = compose(state.anchor, state.since)
             near = self.keyframes.near(predicted, cfg.search_radius_m, cfg.fix_keyframes)
-            fix = self._first_verified(query, near, prediction=predicted)
+            fix = next(
+                (f for kf in near if (f := self._tracking_fix(query, kf, predicted)) is not None),
+                None,
+            )
             if fix is not None:
                 self._add_node(fix, state.since, state.since_cov)
         if state.path_since_fix_m > cfg.lost_after_m:
@@ -353,21 +368,36 @@ class Localizer:
         return self.state.window[-1].pose
 
     # -- verification -------------------------------------------------------------------------
-    def _first_verified(
-        self, query: KeyScan, keyframes: list[int], prediction: FloatArray | None
-    ) -> _Fix | None:
-        """The first keyframe that verifies (and agrees with `prediction` when given)."""
-        cfg = self.cfg
+    def _tracking_fix(self, query: KeyScan, kf: int, predicted: FloatArray) -> _Fix | None:
+        """Phase correlation of the scan and keyframe `kf` turned by the predicted relative yaw
+        (the prediction replaces the sinogram stage of the loop verifier); accepted when the
+        peak is strong and the fix agrees with the prediction."""
+        lcfg, cfg = self.config.loop_closure, self.cfg
+        expected = between(predicted, self.keyframes.poses[kf])  # T_scan_keyframe
+        turn = float(expected[2])
+        if self._prepared_key != query.key or self._prepared is None:
+            self._prepared = prepare(query.scan, lcfg.refinement, query.twist)
+            self._prepared_key = query.key
+        aligned = prepare(turned(self.keyframes.scan(kf).scan, turn), lcfg.refinement)
+        estimate = register(self._prepared, aligned, lcfg.refinement)
+        if not estimate.ok or estimate.quality < lcfg.verification.min_refined_quality:
+            return None
+        measurement = compose(estimate.motion, np.array([0.0, 0.0, turn]))
+        pose = compose(self.keyframes.poses[kf], inverse(measurement))
+        if not self._agrees(predicted, pose, cfg.max_innovation_m, cfg.max_innovation_deg):
+            return None
+        covariance = loop_covariance(
+            estimate.covariance, np.zeros(3), float(measurement[2]), lcfg.covariance
+        )
+        return _Fix(query.key, kf, measurement, covariance, float(estimate.quality), pose)
+
+    def _first_verified(self, query: KeyScan, keyframes: list[int]) -> _Fix | None:
+        """The first keyframe that verifies as a loop does."""
         for kf in keyframes:
             result: Verification = self.verifier(query, self.keyframes.scan(kf))
             if not result.ok:
                 continue
             pose = compose(self.keyframes.poses[kf], inverse(result.measurement))
-            if prediction is not None and not self._agrees(
-                prediction, pose, cfg.max_innovation_m, cfg.max_innovation_deg
-            ):
-                log.debug("scan %d: fix to keyframe %d off the prediction", query.key, kf)
-                continue
             return _Fix(
                 query.key, kf, result.measurement, result.covariance, result.refined_quality, pose
             )

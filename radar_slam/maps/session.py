@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,7 +42,6 @@ from radar_slam.loops import (
     LoopStatus,
     VerifiedLoop,
     is_true_loop,
-    rotate_covariance,
 )
 from radar_slam.maps.build import (
     EDGE_KINDS,
@@ -61,19 +60,15 @@ from radar_slam.maps.localizer import (
     descriptor_config_of,
     image_geometry_of,
 )
+from radar_slam.pipeline import BACKEND_REJECT_WEIGHT, PipelineConfig, Results, odometry_factor
 from radar_slam.trajectory import Trajectory
 from raplace.descriptor import DescriptorExtractor
-
-if TYPE_CHECKING:
-    from radar_slam.pipeline import PipelineConfig, Results
 
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 SESSION_GAP_M = 1e6
 """Path offset between the map's sessions, so the consistency window never joins two of them."""
-BACKEND_REJECT_WEIGHT = 0.5
-"""An inter-session loop whose final GNC weight is below this is rejected by the back end."""
 
 
 @dataclass(frozen=True)
@@ -225,9 +220,7 @@ def joint_graph(
     for n, result in enumerate(odometry):
         graph.add_keyframe(n, initial[n])
         if n:
-            graph.add_odometry(
-                n - 1, n, result.motion, rotate_covariance(result.covariance, result.motion[2])
-            )
+            graph.add_odometry(n - 1, n, *odometry_factor(result))
     for d in results.loops:
         if d.accepted:
             graph.add_loop(d.query_key, d.match_key, d.measurement, d.covariance)

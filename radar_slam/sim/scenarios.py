@@ -12,8 +12,8 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 | multisession_a | session A of a town shared with multisession_b | 351 | 0.9 km |
 | multisession_b | another route sharing streets; cars, vegetation, traffic changed | 522 | 1.2 km |
 | long | three loops, revisits in both directions: benchmarks | 1588 | 4.2 km |
-| multisession_reverse_a | a loop around blocks: map session of a reverse pair | 359 | 0.9 km |
-| multisession_reverse_b | the same streets the other way, other lane, next day | 358 | 0.9 km |
+| multisession_reverse_a | a loop around blocks: map session of a reverse pair | 395 | 1.0 km |
+| multisession_reverse_b | the same streets the other way, other lane, next day | 399 | 1.0 km |
 | tiny_reverse_a, _b | tiny's block one way, then the other way (session 1): CI | 90 | 165 m |
 """
 
@@ -131,8 +131,9 @@ _MULTI_B: Waypoints = (
     (4, 4),
     (4, 3),
 )
-_REVERSE_SESSION_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (2, 1))
-"""A loop around blocks of the town, driven anticlockwise (issue-13: map session)."""
+_REVERSE_SESSION_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (3, 1))
+"""A loop around blocks of the town, driven anticlockwise, its first two blocks again so that
+the map session closes its loop (issue-13: map session)."""
 _REVERSE_SESSION_B: Waypoints = tuple(reversed(_REVERSE_SESSION_A))
 """The same streets clockwise: every street the other way, in the other lane."""
 _TINY_BLOCK: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2), (1, 1))

@@ -36,7 +36,7 @@ class LocalizerConfig:
     relocalise_every_m: float = 4.0
     confirm_max_error_m: float = 1.5
     confirm_max_error_deg: float = 3.0
-    fix_every_m: float = 6.0
+    fix_every_m: float = 10.0
     search_radius_m: float = 12.0
     fix_keyframes: int = 2
     max_innovation_m: float = 2.0

@@ -32,8 +32,8 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import se2
 from radar_slam.errors import ConfigError, GraphError
+from raplace import se2
 
 log = logging.getLogger(__name__)
 
@@ -318,8 +318,8 @@ def relative_pose_covariance(
     The joint covariance is GTSAM's (blocks i then j, each in its own body frame); the result is in
     the frame of the relative pose. Jacobians of `between`: d/di = -Ad((T_i^-1 T_j)^-1), d/dj = I.
     """
-    rel = _pose2(se2.between(pose_i, pose_j))
-    h = np.hstack([-rel.inverse().AdjointMap(), np.eye(POSE_DIM)])
+    rel = se2.between(pose_i, pose_j)
+    h = np.hstack([-se2.adjoint(se2.inverse(rel)), np.eye(POSE_DIM)])
     cov = h @ np.asarray(joint_covariance, dtype=np.float64) @ h.T
     return 0.5 * (cov + cov.T)
 

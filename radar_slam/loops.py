@@ -63,7 +63,6 @@ from odometry import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.registration import PreparedScan, prepare, register
 from odometry.scan import Scan
-from odometry.se2 import between, compose, wrap_angle
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.errors import RadarSlamError
 from radar_slam.graph import LoopConstraint
@@ -71,13 +70,14 @@ from raplace.config import RaPlaceConfig
 from raplace.descriptor import DescriptorExtractor
 from raplace.pose import PoseEstimator, RelativePose
 from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.se2 import adjoint, between, compose, rotate_covariance, wrap_angle
+from raplace.units import NS_PER_S
 
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 LoopStatus = Literal["accepted", "rejected", "pending"]
 
-NS_PER_S = 1e9
 POSE_DIM = 3
 CHI2_3DOF_99 = 11.345
 """Chi-square quantile at 99 % for 3 degrees of freedom (x, y, yaw)."""
@@ -329,27 +329,6 @@ class VerifiedLoop:
 # --------------------------------------------------------------------------- pure functions
 
 
-def adjoint(pose: ArrayLike) -> FloatArray:
-    """SE(2) adjoint (..., 3, 3) of poses (..., 3) in GTSAM's tangent order (x, y, yaw):
-    Exp(Ad(T) xi) = T Exp(xi) T^-1."""
-    p = np.asarray(pose, dtype=np.float64)
-    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
-    ad = np.zeros(p.shape[:-1] + (POSE_DIM, POSE_DIM))
-    ad[..., 0, 0], ad[..., 0, 1], ad[..., 0, 2] = c, -s, p[..., 1]
-    ad[..., 1, 0], ad[..., 1, 1], ad[..., 1, 2] = s, c, -p[..., 0]
-    ad[..., 2, 2] = 1.0
-    return ad
-
-
-def rotate_covariance(covariance: ArrayLike, yaw_rad: float) -> FloatArray:
-    """A (3, 3) covariance whose translation block is in one frame, expressed in a frame turned
-    by `yaw_rad` relative to it (the translation block is rotated by -yaw_rad)."""
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    out = rot @ np.asarray(covariance, dtype=np.float64) @ rot.T
-    return 0.5 * (out + out.T)
-
-
 def loop_covariance(
     peak_covariance: ArrayLike,
     disagreement: ArrayLike,
@@ -375,7 +354,7 @@ def loop_covariance(
     cov = cfg.sigma_scale**2 * np.asarray(peak_covariance, dtype=np.float64)
     cov = cov + np.diag([(w * d_xy) ** 2, (w * d_xy) ** 2, (w * d_yaw) ** 2])
     cov = cov + np.diag([cfg.min_sigma_xy_m**2, cfg.min_sigma_xy_m**2, floor_yaw**2])
-    return rotate_covariance(cov, yaw_rad)
+    return rotate_covariance(cov, -yaw_rad)  # the query frame is turned by -yaw in the match's
 
 
 def odometry_segment_covariance(path_m: ArrayLike, cfg: ConsistencyConfig) -> FloatArray:

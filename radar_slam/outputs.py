@@ -27,7 +27,6 @@ from typing import Any
 
 import numpy as np
 
-from odometry.se2 import compose
 from radar_slam.config import write_yaml
 from radar_slam.errors import TrajectoryError
 from radar_slam.g2o import write_pose_graph
@@ -36,6 +35,7 @@ from radar_slam.metrics import associate, umeyama_alignment_se2
 from radar_slam.pipeline import OdometryRun, Results
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory, write_kitti, write_tum
+from raplace.se2 import compose
 
 log = logging.getLogger(__name__)
 

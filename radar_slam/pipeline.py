@@ -49,10 +49,10 @@ from radar_slam.loops import (
     LoopDecision,
     is_true_loop,
     make_loop_detector,
-    rotate_covariance,
 )
 from radar_slam.metrics import TrajectoryMetrics, evaluate
 from radar_slam.trajectory import Trajectory
+from raplace.se2 import rotate_covariance
 
 log = logging.getLogger(__name__)
 
@@ -277,7 +277,7 @@ def odometry_factor(result: OdometryResult) -> tuple[FloatArray, FloatArray]:
     perturbs a between-factor in the frame of its second pose, so the covariance is turned by
     the motion's rotation.
     """
-    return result.motion, rotate_covariance(result.covariance, float(result.motion[2]))
+    return result.motion, rotate_covariance(result.covariance, -float(result.motion[2]))
 
 
 # --------------------------------------------------------------------------- the pipeline

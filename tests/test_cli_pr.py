@@ -14,7 +14,6 @@ import pytest
 from raplace_scenes import synthetic_world
 from typer.testing import CliRunner
 
-from odometry import se2
 from radar_slam.cli import app, main
 from radar_slam.commands.placerec import MATCHES_HEADER, load_config
 from radar_slam.datasets import open_sequence
@@ -25,6 +24,7 @@ from radar_slam.datasets.navtech import (
     MULRAN_T_BASE_RADAR,
 )
 from radar_slam.placerec import intra_session_candidate_counts, pr_curve, revisit_truth
+from raplace import se2
 from raplace.config import ExclusionConfig
 
 T0_NS = 1_600_000_000_000_000_000

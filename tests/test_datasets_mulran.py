@@ -10,7 +10,6 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry import se2
 from radar_slam.datasets import MulRanSequence, Sequence
 from radar_slam.datasets.mulran import (
     OXFORD_FORM_FOLDERS,
@@ -20,6 +19,7 @@ from radar_slam.datasets.mulran import (
 )
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from raplace import se2
 
 pytestmark = pytest.mark.realdata
 

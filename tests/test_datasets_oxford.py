@@ -9,10 +9,10 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry import se2
 from radar_slam.datasets import OxfordSequence, Sequence
 from radar_slam.datasets.oxford import is_oxford_sequence
 from radar_slam.errors import DatasetFormatError
+from raplace import se2
 
 pytestmark = pytest.mark.realdata
 

@@ -9,7 +9,6 @@ import gtsam
 import numpy as np
 import pytest
 
-from odometry import se2
 from radar_slam.config import merge
 from radar_slam.errors import ConfigError, GraphError
 from radar_slam.graph import (
@@ -19,6 +18,7 @@ from radar_slam.graph import (
     add_loop_factors,
     loop_noise,
 )
+from raplace import se2
 
 # Noise models of the tests (standard deviations x [m], y [m], yaw [rad]).
 SQUARE_ODOMETRY_SIGMAS = np.array([0.2, 0.2, 0.1])

@@ -8,7 +8,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from odometry.se2 import accumulate, between, compose, relative_motions
 from radar_slam.datasets.frame import RadarFrame, Sequence
 from radar_slam.datasets.synthetic import open_synthetic
 from radar_slam.graph import GraphConfig, PoseGraph
@@ -32,6 +31,7 @@ from radar_slam.loops import (
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import get_scenario
 from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.se2 import accumulate, between, compose, relative_motions
 
 SCAN_PERIOD_S = 0.25
 TRUE_TOLERANCE_M = 0.3

@@ -7,7 +7,6 @@ import logging
 import numpy as np
 import pytest
 
-from odometry.se2 import compose, inverse
 from radar_slam.errors import TrajectoryError
 from radar_slam.metrics import (
     TrajectoryMetrics,
@@ -22,6 +21,7 @@ from radar_slam.metrics import (
     umeyama_alignment_se2,
 )
 from radar_slam.trajectory import Trajectory
+from raplace.se2 import compose, inverse
 
 EXACT = 1e-9
 STEP_NS = 100_000_000  # 10 Hz

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry import se2
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist
 from odometry.registration import estimate_motion
 from radar_slam.datasets import OxfordSequence
 from radar_slam.datasets.frame import RadarFrame
+from raplace import se2
 from raplace.warp import polar_sample_coords, remap
 
 pytestmark = pytest.mark.realdata

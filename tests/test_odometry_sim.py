@@ -26,8 +26,8 @@ from radar_slam.sim.generate import Scene, build_scene, generate_sequence, make_
 from radar_slam.sim.render import RenderTables, render_scan
 from radar_slam.sim.scenarios import get_scenario
 from radar_slam.trajectory import Trajectory
+from raplace.units import NS_PER_S
 
-NS_PER_S = 1_000_000_000
 SCAN_PERIOD_S = 0.25
 MAX_ERROR_M = 0.05  # the bars of issue 5
 MAX_ERROR_DEG = 0.1

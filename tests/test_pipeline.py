@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry.se2 import between
 from radar_slam.datasets.frame import Sequence
 from radar_slam.errors import ConfigError, RadarSlamError
 from radar_slam.false_loops import FakeLoopConfig, FalseLoopInjection
@@ -31,6 +30,7 @@ from radar_slam.pipeline import (
 )
 from radar_slam.trajectory import Trajectory
 from raplace.retrieval import PlaceRecognizer
+from raplace.se2 import between
 
 MAX_ATE_RATIO = 0.4  # SLAM / odometry ATE on synthetic/tiny_loop (measured 0.19)
 FALSE_FRACTION = 0.3

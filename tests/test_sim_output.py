@@ -13,7 +13,6 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from odometry import se2
 from radar_slam.commands import simulate as simulate_command
 from radar_slam.datasets import MulRanSequence, open_sequence
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
@@ -27,6 +26,7 @@ from radar_slam.sim.writer import (
     STAMP_FILE,
     WORLD_FILE,
 )
+from raplace import se2
 
 TINY = get_scenario("tiny")
 FRAMES = 12

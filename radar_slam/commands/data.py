@@ -12,9 +12,8 @@ from numpy.typing import NDArray
 from radar_slam.datasets import RadarFrame, Sequence, data_root, families, open_sequence
 from radar_slam.datasets.registry import family_folder
 from radar_slam.errors import RadarSlamError
+from raplace.units import NS_PER_MS, NS_PER_S
 
-NS_PER_S = 1e9
-NS_PER_MS = 1e6
 AZIMUTH_SPACING_TOLERANCE = 0.1
 """Largest deviation of one azimuth step from the mean step, as a fraction of the mean."""
 FULL_TURN_TOLERANCE_RAD = np.deg2rad(5.0)

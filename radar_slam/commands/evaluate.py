@@ -18,8 +18,8 @@ from radar_slam.metrics import (
     evaluate,
 )
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
+from raplace.units import NS_PER_MS
 
-NS_PER_MS = 1_000_000
 MISSING = "n/a"
 TABLE_COLUMNS = (
     ("poses", "poses_matched", "{:d}"),

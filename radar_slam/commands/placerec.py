@@ -51,13 +51,13 @@ from radar_slam.placerec import (
 from radar_slam.plots import plot_pr_curves
 from radar_slam.results import result_dir
 from raplace.config import ExclusionConfig, RaPlaceConfig
+from raplace.units import NS_PER_S
 
 log = logging.getLogger(__name__)
 
 RESULTS_FAMILY = "pr"
 MATCHES_HEADER = ("method", "query_ns", "match_ns", "distance")
 METHOD_LABELS = {"raplace": "RaPlace", "scancontext": "Scan Context"}
-NS_PER_S = 1e-9
 NUMBER_LIST = re.compile(r"\[\s*([-+0-9.eE,\snul]*?)\s*\]")
 """A JSON list holding only numbers (and null), as json.dumps(indent=...) spreads it."""
 WHITESPACE = re.compile(r"\s+")
@@ -359,7 +359,7 @@ def run_evaluation(
     mode: Mode
     if reference is None:
         matches = match_intra_session(query.frames(f"pr {label}"), runs)
-        times_s = query.timestamps_ns.astype(np.float64) * NS_PER_S
+        times_s = query.timestamps_ns.astype(np.float64) / NS_PER_S
         counts = intra_session_candidate_counts(times_s, exclusion)
         map_frames, mode = query, "intra"
     else:

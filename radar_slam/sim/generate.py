@@ -20,7 +20,6 @@ from radar_slam.errors import RadarSlamError
 from radar_slam.sim.render import Renderer
 from radar_slam.sim.route import Trajectory, drive, route_edges
 from radar_slam.sim.scenarios import Scenario
-from radar_slam.sim.sensor import NS_PER_S
 from radar_slam.sim.town import Town, generate_town
 from radar_slam.sim.world import World, build_world
 from radar_slam.sim.writer import (
@@ -31,6 +30,7 @@ from radar_slam.sim.writer import (
     write_json,
     write_stamps,
 )
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 

@@ -62,14 +62,13 @@ from numpy.typing import ArrayLike, NDArray
 from odometry import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.registration import PreparedScan, prepare, register
-from odometry.scan import Scan
-from radar_slam.datasets.frame import RadarFrame
+from odometry.scan import RadarFrame, Scan
 from radar_slam.errors import RadarSlamError
 from radar_slam.graph import LoopConstraint
 from raplace.config import RaPlaceConfig
 from raplace.descriptor import DescriptorExtractor
 from raplace.pose import PoseEstimator, RelativePose
-from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.retrieval import PlaceRecognizer, Recognizer
 from raplace.se2 import adjoint, between, compose, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
@@ -726,16 +725,6 @@ class LoopCloser(Protocol):
 
     @property
     def proposed(self) -> int: ...
-
-
-class Recognizer(Protocol):
-    """The place database interface the detector uses (`raplace.retrieval.PlaceRecognizer`)."""
-
-    def add(self, descriptor: NDArray, key: int, time_s: float | None = None) -> None: ...
-
-    def query(
-        self, descriptor: NDArray, k: int = 1, time_s: float | None = None
-    ) -> list[Candidate]: ...
 
 
 @dataclass

@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from odometry import Odometry, OdometryConfig, OdometryResult
 from radar_slam.config import configs_dir, merge, read_yaml
 from radar_slam.datasets import DatasetConfig, open_sequence
-from radar_slam.datasets.frame import RadarFrame, Sequence
+from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.errors import ConfigError, RadarSlamError, TrajectoryError
 from radar_slam.g2o import G2oGraph, g2o_to_pose_graph
 from radar_slam.graph import GraphConfig, LoopConstraint, PoseGraph
@@ -104,7 +104,7 @@ def load_config(
 
 def open_configured(
     spec: str, data_root: Path | None = None, path: Path | None = None
-) -> tuple[Sequence, PipelineConfig]:
+) -> tuple[RadarSequence, PipelineConfig]:
     """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`).
 
     The family, known only once the sequence is found, selects the shipped overrides; when the
@@ -235,7 +235,7 @@ class StepTimer:
 # --------------------------------------------------------------------------- shared helpers
 
 
-def frame_count(sequence: Sequence, max_frames: int | None) -> int:
+def frame_count(sequence: RadarSequence, max_frames: int | None) -> int:
     """Scans to process: all, or the first `max_frames`."""
     if max_frames is not None and max_frames < 1:
         raise RadarSlamError(f"--max-frames must be at least 1, got {max_frames}")
@@ -243,11 +243,13 @@ def frame_count(sequence: Sequence, max_frames: int | None) -> int:
     return n if max_frames is None else min(n, max_frames)
 
 
-def sequence_label(sequence: Sequence) -> str:
+def sequence_label(sequence: RadarSequence) -> str:
     return f"{sequence.family}/{sequence.name}"
 
 
-def ground_truth_of(sequence: Sequence, frames: int) -> tuple[FloatArray | None, Trajectory | None]:
+def ground_truth_of(
+    sequence: RadarSequence, frames: int
+) -> tuple[FloatArray | None, Trajectory | None]:
     """((frames, 3) GT with NaN rows, the GT trajectory without them) or (None, None)."""
     gt = sequence.ground_truth
     if gt is None:
@@ -298,7 +300,7 @@ class Pipeline:
 
     def __init__(
         self,
-        sequence: Sequence,
+        sequence: RadarSequence,
         config: PipelineConfig | None = None,
         max_frames: int | None = None,
         progress: ProgressCallback | None = None,
@@ -547,7 +549,7 @@ class OdometryRun:
 
 
 def run_odometry(
-    sequence: Sequence,
+    sequence: RadarSequence,
     config: PipelineConfig | None = None,
     max_frames: int | None = None,
     progress: ProgressCallback | None = None,
@@ -601,7 +603,7 @@ class GraphLoopsRun:
 
 def close_loops_on_graph(
     record: G2oGraph,
-    sequence: Sequence,
+    sequence: RadarSequence,
     config: PipelineConfig | None = None,
     progress: ProgressCallback | None = None,
 ) -> GraphLoopsRun:

@@ -47,7 +47,7 @@ from radar_slam.datasets.frame import RadarFrame
 from radar_slam.errors import RadarSlamError
 from raplace.config import ExclusionConfig, RaPlaceConfig
 from raplace.descriptor import DescriptorExtractor
-from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.retrieval import PlaceRecognizer, Recognizer
 from raplace.scancontext import ScanContextExtractor, ScanContextRecognizer
 from raplace.units import NS_PER_S
 
@@ -347,16 +347,6 @@ class Extractor(Protocol):
     def __call__(
         self, polar: NDArray, azimuths_rad: NDArray[np.float64], range_resolution_m: float
     ) -> NDArray[np.float32]: ...
-
-
-class Recognizer(Protocol):
-    def __len__(self) -> int: ...
-
-    def add(self, descriptor: NDArray, key: int, time_s: float | None = None) -> None: ...
-
-    def query(
-        self, descriptor: NDArray, k: int = 1, time_s: float | None = None
-    ) -> list[Candidate]: ...
 
 
 @dataclass

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from radar_slam.datasets import MulRanSequence, Sequence
+from radar_slam.datasets import MulRanSequence, RadarSequence
 from radar_slam.datasets.mulran import (
     OXFORD_FORM_FOLDERS,
     POLAR_FOLDERS,
@@ -91,7 +91,7 @@ def raw_csv(mulran_raw_dir: Path) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("relative", POLAR_FOLDERS)
 def test_every_polar_layout_loads(tmp_path: Path, mulran_raw_dir: Path, relative: str) -> None:
     seq = MulRanSequence(make_sequence(tmp_path, mulran_raw_dir, relative))
-    assert isinstance(seq, Sequence)
+    assert isinstance(seq, RadarSequence)
     assert is_mulran_sequence(seq.folder)
     assert (seq.name, seq.family, len(seq)) == ("KAIST01", "mulran", N_SCANS)
     assert seq.timestamps_ns.dtype == np.int64

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from raplace_scenes import render_polar, synthetic_world
 
-from radar_slam.datasets import RadarFrame, Sequence
+from radar_slam.datasets import RadarFrame, RadarSequence
 from radar_slam.datasets.synthetic import open_synthetic
 from radar_slam.placerec import (
     NO_MATCH,
@@ -239,7 +239,7 @@ SMALL_EXCLUDE = 40
 
 
 @pytest.fixture(scope="module")
-def small_reverse(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
+def small_reverse(tmp_path_factory: pytest.TempPathFactory) -> RadarSequence:
     tiny = SCENARIOS["tiny"]
     scenario = replace(
         tiny,
@@ -254,7 +254,7 @@ def small_reverse(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
     return open_synthetic(folder)
 
 
-def test_simulated_reverse_revisits(small_reverse: Sequence) -> None:
+def test_simulated_reverse_revisits(small_reverse: RadarSequence) -> None:
     """RaPlace finds the opposite-direction revisits that Scan Context mostly misses."""
     exclusion = ExclusionConfig(SMALL_EXCLUDE, 0.0)
     runs = method_runs(["raplace", "scancontext"], with_exclusion(RaPlaceConfig(), exclusion))

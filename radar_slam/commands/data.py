@@ -9,7 +9,7 @@ import numpy as np
 import typer
 from numpy.typing import NDArray
 
-from radar_slam.datasets import RadarFrame, Sequence, data_root, families, open_sequence
+from radar_slam.datasets import RadarFrame, RadarSequence, data_root, families, open_sequence
 from radar_slam.datasets.registry import family_folder
 from radar_slam.errors import RadarSlamError
 from raplace.units import NS_PER_MS, NS_PER_S
@@ -106,7 +106,7 @@ def trajectory_length_m(poses: NDArray[np.float64]) -> float:
     return float(np.nansum(steps))
 
 
-def describe_sequence(sequence: Sequence, spec: str) -> list[str]:
+def describe_sequence(sequence: RadarSequence, spec: str) -> list[str]:
     """Human-readable lines describing `sequence` (reads its first scan and its GT)."""
     frame = sequence[0]
     stamps = sequence.timestamps_ns

@@ -30,7 +30,7 @@ from tqdm import tqdm
 
 from radar_slam.commands.data import DATA_ROOT_OPTION
 from radar_slam.config import merge, read_yaml, write_yaml
-from radar_slam.datasets import RadarFrame, Sequence, open_sequence
+from radar_slam.datasets import RadarFrame, RadarSequence, open_sequence
 from radar_slam.placerec import (
     DEFAULT_CRITERION_M,
     DEFAULT_EXCLUDE_RECENT,
@@ -85,7 +85,7 @@ class EvaluatedFrames:
         timestamps_ns: (n,) frame times [ns].
     """
 
-    sequence: Sequence
+    sequence: RadarSequence
     indices: NDArray[np.int64]
     xy: NDArray[np.float64]
     timestamps_ns: NDArray[np.int64]
@@ -101,11 +101,11 @@ class EvaluatedFrames:
             yield position, self.sequence[int(self.indices[position])]
 
 
-def spec_name(sequence: Sequence) -> str:
+def spec_name(sequence: RadarSequence) -> str:
     return f"{sequence.family}/{sequence.name}"
 
 
-def evaluated_frames(sequence: Sequence, max_frames: int | None) -> EvaluatedFrames:
+def evaluated_frames(sequence: RadarSequence, max_frames: int | None) -> EvaluatedFrames:
     """The first `max_frames` frames of `sequence` that have a ground-truth pose.
 
     Raises:

@@ -6,7 +6,7 @@ Address a sequence as `family/sequence` or by its folder path.
 
 from __future__ import annotations
 
-from radar_slam.datasets.frame import RadarFrame, Sequence
+from radar_slam.datasets.frame import RadarFrame, RadarSequence, Sequence
 from radar_slam.datasets.mulran import MulRanSequence
 from radar_slam.datasets.open import open_sequence
 from radar_slam.datasets.oxford import OxfordSequence
@@ -18,6 +18,7 @@ __all__ = [
     "MulRanSequence",
     "OxfordSequence",
     "RadarFrame",
+    "RadarSequence",
     "Sequence",
     "data_root",
     "families",

@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 
 DATA_ROOT_ENV = "RADAR_SLAM_DATA"
 DEFAULT_DATA_ROOT = Path("data")
@@ -37,7 +37,7 @@ class Family:
 
     Attributes:
         name: family key, e.g. "mulran".
-        open: builds a Sequence from a sequence folder; accepts the keyword arguments of
+        open: builds a RadarSequence from a sequence folder; accepts the keyword arguments of
             `DatasetConfig.loader_options()`.
         detect: True when a folder looks like a sequence of this family.
         layout: human description of the expected folder layout (for error messages).
@@ -50,7 +50,7 @@ class Family:
     """
 
     name: str
-    open: Callable[..., Sequence]
+    open: Callable[..., RadarSequence]
     detect: Callable[[Path], bool]
     layout: str
     obtain: str

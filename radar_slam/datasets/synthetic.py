@@ -18,7 +18,7 @@ import os
 import shutil
 from pathlib import Path
 
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.mulran import MulRanSequence, is_mulran_sequence
 from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
 from radar_slam.datasets.registry import Family, family_folder, register
@@ -116,7 +116,7 @@ def resolve_synthetic(root: Path, name: str) -> Path:
     return folder
 
 
-def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Sequence:
+def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> RadarSequence:
     """Open a simulated sequence with the MulRan loader (bin count and size from world.json).
 
     `range_resolution_m` overrides the simulated bin size (the `dataset:` config section), e.g.

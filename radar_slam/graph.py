@@ -26,13 +26,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radar_slam.errors import ConfigError, GraphError
+from radar_slam.loops.records import LoopConstraint
 from raplace import se2
 
 log = logging.getLogger(__name__)
@@ -148,22 +149,6 @@ class GraphConfig:
                 "graph.gnc_inlier_probability: must be in (0, 1), "
                 f"got {self.gnc_inlier_probability}"
             )
-
-
-class LoopConstraint(NamedTuple):
-    """A verified loop: the pose of keyframe j in the frame of keyframe i, with its covariance.
-
-    Attributes:
-        i: key of the reference (usually the query) keyframe.
-        j: key of the other keyframe.
-        measurement: (3,) T_i^-1 T_j `(x [m], y [m], yaw [rad])`.
-        covariance: (3, 3) of the measurement, tangent order (x, y, yaw), frame of the measurement.
-    """
-
-    i: int
-    j: int
-    measurement: ArrayLike
-    covariance: ArrayLike
 
 
 @dataclass(frozen=True)

@@ -41,13 +41,13 @@ from radar_slam.config import configs_dir, merge, read_yaml
 from radar_slam.datasets import DatasetConfig, open_sequence
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.errors import ConfigError, RadarSlamError, TrajectoryError
+from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.g2o import G2oGraph, g2o_to_pose_graph
 from radar_slam.graph import GraphConfig, LoopConstraint, PoseGraph
 from radar_slam.loops import (
-    LoopCloser,
     LoopClosureConfig,
     LoopDecision,
-    is_true_loop,
+    LoopDetectorProtocol,
     make_loop_detector,
 )
 from radar_slam.metrics import TrajectoryMetrics, evaluate
@@ -304,14 +304,14 @@ class Pipeline:
         config: PipelineConfig | None = None,
         max_frames: int | None = None,
         progress: ProgressCallback | None = None,
-        loop_detector: LoopCloser | None = None,
+        loop_detector: LoopDetectorProtocol | None = None,
     ) -> None:
         self.sequence = sequence
         self.config = PipelineConfig() if config is None else config
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
-        self.loop_detector: LoopCloser = (
+        self.loop_detector: LoopDetectorProtocol = (
             make_loop_detector(self.config.loop_closure, scan_loader=self._reread)
             if loop_detector is None
             else loop_detector
@@ -443,7 +443,7 @@ class Pipeline:
 def review_loops(
     graph: PoseGraph,
     loop_ids: dict[tuple[int, int], int],
-    detector: LoopCloser,
+    detector: LoopDetectorProtocol,
 ) -> int:
     """Mark the accepted loops whose weight after the final pass is below
     `BACKEND_REJECT_WEIGHT` as rejected by it; returns how many.
@@ -597,7 +597,8 @@ class GraphLoopsRun:
     seconds: float
 
     @property
-    def accepted(self) -> int:
+    def n_accepted(self) -> int:
+        """Number of accepted loops."""
         return sum(d.accepted for d in self.loops)
 
 

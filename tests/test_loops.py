@@ -10,6 +10,7 @@ import pytest
 
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.datasets.synthetic import open_synthetic
+from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import GraphConfig, PoseGraph
 from radar_slam.loops import (
     ConsistencyConfig,
@@ -23,7 +24,6 @@ from radar_slam.loops import (
     NullLoopDetector,
     VerifiedLoop,
     cycle_mahalanobis,
-    is_true_loop,
     loop_covariance,
     make_loop_detector,
     motion_compensated,

@@ -50,7 +50,7 @@ def loops_command(
     write_pose_graph(out, run.graph)
     typer.echo(
         f"{seq.family}/{seq.name}: {len(record.vertices)} vertices, {len(record.edges)} edges in; "
-        f"{len(run.loops)} verified loop proposals, {run.accepted} accepted; "
+        f"{len(run.loops)} verified loop proposals, {run.n_accepted} accepted; "
         f"{run.seconds:.1f} s"
     )
     typer.echo(f"wrote {out}")

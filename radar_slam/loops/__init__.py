@@ -1,16 +1,72 @@
-"""Loop closing (being split into a package)."""
+"""Loop closing: verified radar loop constraints for any pose-graph back end (no GTSAM here).
 
-from radar_slam.loops.detector import *  # noqa: F403
-from radar_slam.loops.detector import (  # noqa: F401
-    KeyScan,
-    LoopCloser,
-    LoopDecision,
-    Recognizer,
-    Verification,
-    Verifier,
-    cycle_mahalanobis,
-    is_true_loop,
-    loop_covariance,
+`LoopDetector` proposes loops with RaPlace, verifies them geometrically
+(`radar_slam.loops.verification`) and, given odometry poses, accepts those that agree pairwise
+(`radar_slam.loops.consistency`); it returns `LoopConstraint`s, T_query_match with covariance.
+"""
+
+from radar_slam.loops.config import (
+    ConsistencyConfig,
+    LoopClosureConfig,
+    LoopCovarianceConfig,
+    VerificationConfig,
+)
+from radar_slam.loops.consistency import ConsistencyGate, cycle_mahalanobis
+from radar_slam.loops.detector import (
+    LoopDetector,
+    LoopDetectorProtocol,
+    NullLoopDetector,
     make_loop_detector,
+)
+from radar_slam.loops.records import (
+    KeyScan,
+    LoopClosureError,
+    LoopConstraint,
+    LoopDecision,
+    LoopStatus,
+    Verification,
+    VerifiedLoop,
+)
+from radar_slam.loops.verification import (
+    GeometricVerifier,
+    Verifier,
+    loop_covariance,
     motion_compensated,
 )
+from raplace.retrieval import Recognizer
+
+
+def __getattr__(name: str) -> object:
+    # `is_true_loop` judges loops against ground truth; it moved to radar_slam.evaluation.truth
+    # (the detector never uses it). The old import path still resolves, without loading it here.
+    if name == "is_true_loop":
+        from radar_slam.evaluation import truth
+
+        return truth.is_true_loop
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = [
+    "ConsistencyConfig",
+    "ConsistencyGate",
+    "GeometricVerifier",
+    "KeyScan",
+    "LoopClosureConfig",
+    "LoopClosureError",
+    "LoopConstraint",
+    "LoopCovarianceConfig",
+    "LoopDecision",
+    "LoopDetector",
+    "LoopDetectorProtocol",
+    "LoopStatus",
+    "NullLoopDetector",
+    "Recognizer",
+    "Verification",
+    "VerificationConfig",
+    "VerifiedLoop",
+    "Verifier",
+    "cycle_mahalanobis",
+    "loop_covariance",
+    "make_loop_detector",
+    "motion_compensated",
+]

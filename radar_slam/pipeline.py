@@ -41,6 +41,7 @@ from radar_slam.config import configs_dir, merge, read_yaml
 from radar_slam.datasets import DatasetConfig, open_sequence
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.errors import ConfigError, RadarSlamError, TrajectoryError
+from radar_slam.evaluation.metrics import TrajectoryMetrics, evaluate
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.g2o import G2oGraph, g2o_to_pose_graph
 from radar_slam.graph import GraphConfig, LoopConstraint, PoseGraph
@@ -50,7 +51,6 @@ from radar_slam.loops import (
     LoopDetectorProtocol,
     make_loop_detector,
 )
-from radar_slam.metrics import TrajectoryMetrics, evaluate
 from radar_slam.trajectory import Trajectory
 from raplace.se2 import rotate_covariance
 

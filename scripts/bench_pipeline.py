@@ -28,7 +28,7 @@ import numpy as np
 
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
-from radar_slam.false_loops import FalseLoopInjection
+from radar_slam.evaluation.false_loops import FalseLoopInjection
 from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
 from raplace.retrieval import PlaceRecognizer

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from radar_slam.errors import TrajectoryError
-from radar_slam.metrics import (
+from radar_slam.evaluation.metrics import (
     TrajectoryMetrics,
     align,
     associate,
@@ -148,7 +148,7 @@ def test_constant_yaw_rate_drift_by_hand() -> None:
 
 
 def test_drift_undefined_below_100_m(caplog: pytest.LogCaptureFixture) -> None:
-    with caplog.at_level(logging.INFO, logger="radar_slam.metrics"):
+    with caplog.at_level(logging.INFO, logger="radar_slam.evaluation.metrics"):
         assert kitti_drift(straight(90), straight(90)) is None
     assert "shorter than the shortest segment" in caplog.text
     metrics = evaluate(straight(90), straight(90))

@@ -13,14 +13,14 @@ import pytest
 
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import ConfigError, RadarSlamError
+from radar_slam.evaluation.false_loops import FakeLoopConfig, FalseLoopInjection
+from radar_slam.evaluation.metrics import evaluate
 from radar_slam.evaluation.truth import is_true_loop
-from radar_slam.false_loops import FakeLoopConfig, FalseLoopInjection
 from radar_slam.g2o import G2oEdge, G2oGraph
 from radar_slam.loops import (
     GeometricVerifier,
     LoopDetector,
 )
-from radar_slam.metrics import evaluate
 from radar_slam.pipeline import (
     Pipeline,
     PipelineConfig,

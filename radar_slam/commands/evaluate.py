@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 
 from radar_slam.errors import ResultsError
-from radar_slam.metrics import (
+from radar_slam.evaluation.metrics import (
     DEFAULT_MAX_TIME_DIFF_NS,
     DEFAULT_RPE_DELTA,
     KITTI_SEGMENT_LENGTHS_M,

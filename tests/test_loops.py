@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
-from radar_slam.datasets.synthetic import open_synthetic
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import GraphConfig, PoseGraph
 from radar_slam.loops import (
@@ -28,6 +27,7 @@ from radar_slam.loops import (
     make_loop_detector,
     motion_compensated,
 )
+from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import get_scenario
 from raplace.retrieval import Candidate, PlaceRecognizer

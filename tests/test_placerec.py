@@ -9,7 +9,6 @@ import pytest
 from raplace_scenes import render_polar, synthetic_world
 
 from radar_slam.datasets import RadarFrame, RadarSequence
-from radar_slam.datasets.synthetic import open_synthetic
 from radar_slam.placerec import (
     NO_MATCH,
     BestMatches,
@@ -26,6 +25,7 @@ from radar_slam.placerec import (
     sweep_thresholds,
     with_exclusion,
 )
+from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import SCENARIOS
 from raplace.config import ExclusionConfig, RaPlaceConfig

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from radar_slam.commands import simulate as simulate_command
 from radar_slam.datasets import MulRanSequence, open_sequence
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
-from radar_slam.datasets.synthetic import PARTIAL_SUFFIX, resolve_synthetic
+from radar_slam.sim.family import PARTIAL_SUFFIX, resolve_synthetic
 from radar_slam.sim.generate import build_scene, generate_sequence
 from radar_slam.sim.scenarios import TINY_BINS, get_scenario
 from radar_slam.sim.writer import (

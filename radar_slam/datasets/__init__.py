@@ -11,7 +11,6 @@ from radar_slam.datasets.mulran import MulRanSequence
 from radar_slam.datasets.open import open_sequence
 from radar_slam.datasets.oxford import OxfordSequence
 from radar_slam.datasets.registry import DatasetConfig, data_root, families
-from radar_slam.datasets.synthetic import SYNTHETIC  # noqa: F401  (importing registers the family)
 
 __all__ = [
     "DatasetConfig",

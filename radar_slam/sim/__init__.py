@@ -11,7 +11,8 @@ Modules, in pipeline order:
     generate.py   build a scene and write a sequence
     writer.py     the files (polar PNGs, global_pose.csv, stamps, world.json, marker)
     figure.py     overview figure (matplotlib)
+    family.py     the `synthetic` dataset family (a plug-in of the dataset registry)
 
 Entry points: `generate.generate_sequence(scenario, folder)`, the `synthetic` dataset family
-(`radar_slam.datasets.synthetic`) and `radar-slam simulate`.
+(`radar_slam.sim.family`) and `radar-slam simulate`.
 """

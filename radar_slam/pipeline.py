@@ -238,7 +238,7 @@ class StepTimer:
 def frame_count(sequence: RadarSequence, max_frames: int | None) -> int:
     """Scans to process: all, or the first `max_frames`."""
     if max_frames is not None and max_frames < 1:
-        raise RadarSlamError(f"--max-frames must be at least 1, got {max_frames}")
+        raise RadarSlamError(f"max_frames must be at least 1, got {max_frames}")
     n = len(sequence)
     return n if max_frames is None else min(n, max_frames)
 

@@ -9,6 +9,7 @@ import numpy as np
 import typer
 from numpy.typing import NDArray
 
+from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.datasets import RadarFrame, RadarSequence, data_root, families, open_sequence
 from radar_slam.datasets.registry import family_folder
 from radar_slam.errors import RadarSlamError
@@ -20,12 +21,6 @@ FULL_TURN_TOLERANCE_RAD = np.deg2rad(5.0)
 """How far n_azimuths * mean step may be from 360 deg before the sweep is flagged."""
 MAX_SWEEP_PERIODS = 2.0
 """A sweep whose azimuth times span more than this many frame periods is flagged."""
-
-DATA_ROOT_OPTION = typer.Option(
-    None,
-    "--data-root",
-    help="Folder holding <family>/<sequence> folders (default: $RADAR_SLAM_DATA, else ./data).",
-)
 
 
 @dataclass(frozen=True)

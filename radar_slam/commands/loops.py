@@ -13,8 +13,7 @@ from pathlib import Path
 
 import typer
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
-from radar_slam.commands.run import progress_bar
+from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
 from radar_slam.errors import ResultsError
 from radar_slam.g2o import read_g2o, write_pose_graph
 from radar_slam.pipeline import close_loops_on_graph, open_configured

@@ -28,7 +28,7 @@ import typer
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
+from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.config import merge, read_yaml, write_yaml
 from radar_slam.datasets import RadarFrame, RadarSequence, open_sequence
 from radar_slam.placerec import (

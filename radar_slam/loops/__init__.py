@@ -35,17 +35,6 @@ from radar_slam.loops.verification import (
 )
 from raplace.retrieval import Recognizer
 
-
-def __getattr__(name: str) -> object:
-    # `is_true_loop` judges loops against ground truth; it moved to radar_slam.evaluation.truth
-    # (the detector never uses it). The old import path still resolves, without loading it here.
-    if name == "is_true_loop":
-        from radar_slam.evaluation import truth
-
-        return truth.is_true_loop
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 __all__ = [
     "ConsistencyConfig",
     "ConsistencyGate",

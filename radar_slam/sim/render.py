@@ -40,8 +40,8 @@ from radar_slam.sim.physics import (
     sidelobe_taps,
 )
 from radar_slam.sim.route import Trajectory
+from radar_slam.sim.scatterers import Occluders, World
 from radar_slam.sim.sensor import SensorConfig
-from radar_slam.sim.world import Occluders, World
 from raplace.units import NS_PER_S
 
 F32 = NDArray[np.float32]

@@ -32,6 +32,7 @@ from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import get_scenario
 from raplace.retrieval import Candidate, PlaceRecognizer
 from raplace.se2 import accumulate, between, compose, relative_motions
+from raplace.units import NS_PER_S
 
 SCAN_PERIOD_S = 0.25
 TRUE_TOLERANCE_M = 0.3
@@ -124,7 +125,7 @@ def test_motion_compensation_moves_opposite_scans_by_speed_times_sweep(tiny: Rad
     query = KeyScan(0, frame.timestamp_ns, frame, moving)
     match = KeyScan(1, frame.timestamp_ns, frame, moving)
     times = np.asarray(frame.azimuth_times_ns, dtype=np.float64)
-    mean_offset_s = float(np.mean(times - frame.timestamp_ns)) / 1e9
+    mean_offset_s = float(np.mean(times - frame.timestamp_ns)) / NS_PER_S
     facing = np.array([0.0, 0.0, np.pi])  # the match faces the other way
     corrected = motion_compensated(facing, query, match)
     assert np.isclose(corrected[0], 2 * speed * mean_offset_s)  # about -2.5 m at 10 m/s

@@ -30,6 +30,7 @@ from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import SCENARIOS
 from raplace.config import ExclusionConfig, RaPlaceConfig
 from raplace.retrieval import candidate_mask
+from raplace.units import NS_PER_S
 
 INF = float("inf")
 # Six queries with hand-counted outcomes: best-match distance, match within the criterion,
@@ -261,7 +262,7 @@ def test_simulated_reverse_revisits(small_reverse: RadarSequence) -> None:
     frames = ((i, small_reverse[i]) for i in range(len(small_reverse)))
     results = match_intra_session(frames, runs)
     xy = small_reverse.ground_truth[:, :2]
-    times_s = small_reverse.timestamps_ns * 1e-9
+    times_s = small_reverse.timestamps_ns / NS_PER_S
     counts = intra_session_candidate_counts(times_s, exclusion)
     curves = {m: evaluate_matches(r, xy, xy, counts, 20.0) for m, r in results.items()}
     assert curves["raplace"].true_revisits >= 15

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.loops import KeyScan, Recognizer, Verification, Verifier
-from raplace.retrieval import Candidate
+from radar_slam.loops import KeyScan, Verification, Verifier
+from raplace.retrieval import Candidate, Recognizer
 
 
 @dataclass(frozen=True)

@@ -18,3 +18,16 @@ Modules, in pipeline order:
 Entry points: `generate.generate_sequence(scenario, folder)`, the `synthetic` dataset family
 (`radar_slam.sim.family`) and `radar-slam simulate`.
 """
+
+from radar_slam.sim.generate import GeneratedSequence, Scene, build_scene, generate_sequence
+from radar_slam.sim.scenarios import SCENARIOS, Scenario, get_scenario
+
+__all__ = [
+    "SCENARIOS",
+    "GeneratedSequence",
+    "Scenario",
+    "Scene",
+    "build_scene",
+    "generate_sequence",
+    "get_scenario",
+]

@@ -1,6 +1,7 @@
 """Radar datasets: the frame record, the sequence protocol, loaders and `open_sequence`.
 
-Importing this package registers the dataset families `mulran`, `oxford` and `synthetic`.
+Importing this package registers the families `mulran` and `oxford`; plug-in families (the
+simulator's `synthetic`) register through the `radar_slam.datasets` entry point on first lookup.
 Address a sequence as `family/sequence` or by its folder path.
 """
 

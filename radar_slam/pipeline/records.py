@@ -89,7 +89,7 @@ class Results:
         ground_truth_poses: (frames, 3) ground truth per scan with NaN rows, or None.
         odometry_results: the odometry's per-scan results.
         loops: every verified loop proposal with its final status and reason.
-        true_loops: per loop, whether it is true (`loops.is_true_loop`), None without GT.
+        true_loops: per loop, whether it is true (`evaluation.truth.is_true_loop`), None without GT.
         graph: the final pose graph (estimates = slam).
         timings_s: wall time per pipeline step [s].
         metrics: the summary metrics.

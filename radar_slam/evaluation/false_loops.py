@@ -82,6 +82,9 @@ class InjectingRecognizer:
         self.injection = injection
         self.keys: list[int] = []
 
+    def __len__(self) -> int:
+        return len(self.inner)
+
     def add(self, descriptor: NDArray, key: int, time_s: float | None = None) -> None:
         self.inner.add(descriptor, key, time_s)
         self.keys.append(key)

@@ -33,8 +33,8 @@ from numpy.typing import NDArray
 from odometry import se2
 from radar_slam.datasets._io import (
     check_strictly_increasing,
+    decode_oxford_form,
     list_stamped_files,
-    parse_navtech_header,
     read_gray_png,
     read_numeric_table,
 )
@@ -45,7 +45,6 @@ from radar_slam.datasets.navtech import (
     OXFORD_N_BINS,
     OXFORD_RANGE_RESOLUTION_M,
     SCAN_RATE_HZ,
-    encoder_to_azimuth_ccw,
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
@@ -249,14 +248,14 @@ class OxfordSequence:
         index %= len(self)
         path = self._paths[index]
         image = read_gray_png(path, (OXFORD_N_AZIMUTHS, OXFORD_HEADER_BYTES + OXFORD_N_BINS))
-        header = parse_navtech_header(image, path)
+        scan = decode_oxford_form(image, path, NS_PER_US)
         return RadarFrame(
             timestamp_ns=int(self._times_ns[index]),
-            polar=np.ascontiguousarray(image[:, OXFORD_HEADER_BYTES:]),
-            azimuths_rad=encoder_to_azimuth_ccw(header.encoders),
+            polar=scan.polar,
+            azimuths_rad=scan.azimuths_rad,
             range_resolution_m=self.range_resolution_m,
             sensor=OXFORD_SENSOR,
-            azimuth_times_ns=header.times * NS_PER_US,
+            azimuth_times_ns=scan.azimuth_times_ns,
         )
 
     @property

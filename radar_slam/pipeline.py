@@ -52,6 +52,7 @@ from radar_slam.loops import (
     rotate_covariance,
 )
 from radar_slam.metrics import TrajectoryMetrics, evaluate
+from radar_slam.observer import PipelineObserver
 from radar_slam.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -294,6 +295,8 @@ class Pipeline:
         loop_detector: a detector to use instead of the configured one (e.g. one with another
             place recognizer or verifier); it must not have seen scans yet. Its keys are the scan
             indices.
+        observer: watches the run scan by scan (e.g. the live viewer); see
+            `radar_slam.observer.PipelineObserver`.
     """
 
     def __init__(
@@ -303,8 +306,10 @@ class Pipeline:
         max_frames: int | None = None,
         progress: ProgressCallback | None = None,
         loop_detector: LoopCloser | None = None,
+        observer: PipelineObserver | None = None,
     ) -> None:
         self.sequence = sequence
+        self.observer = observer  # issue-14: live viewer hook
         self.config = PipelineConfig() if config is None else config
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
@@ -330,10 +335,15 @@ class Pipeline:
             loops = self._detect_loops(frame, result)
             self._close_loops(loops)
             self._report(index + 1)
+            if self.observer is not None:  # issue-14: live viewer hook
+                self.observer.on_scan(self, frame, result)
         self._close_loops(self._resolve_pending())
         self._optimise()
         self._review_loops()
-        return self._evaluate(time.perf_counter() - self._start)
+        results = self._evaluate(time.perf_counter() - self._start)
+        if self.observer is not None:  # issue-14: live viewer hook
+            self.observer.on_finish(results)
+        return results
 
     # -- per-scan steps -----------------------------------------------------------------------
     def _read(self, index: int) -> RadarFrame:

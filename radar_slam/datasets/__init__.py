@@ -14,9 +14,11 @@ from radar_slam.datasets.open import open_sequence
 from radar_slam.datasets.oxford import OxfordSequence
 from radar_slam.datasets.radiate import RadiateSequence
 from radar_slam.datasets.registry import DatasetConfig, data_root, families
+from radar_slam.datasets.rosbag import BagSequence
 from radar_slam.datasets.synthetic import SYNTHETIC  # noqa: F401  (importing registers the family)
 
 __all__ = [
+    "BagSequence",
     "BoreasSequence",
     "DatasetConfig",
     "MulRanSequence",

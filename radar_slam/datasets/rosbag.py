@@ -242,6 +242,8 @@ class BagSequence:
 
     def _scan_info(self) -> dict[str, Any]:
         connections = [c for c in self._reader.connections if c.topic == SCAN_INFO_TOPIC]
+        if not connections:  # (rosbags reads every topic when given no connections)
+            return {}
         for _, _, raw in self._reader.messages(connections=connections):
             message = self._decode(raw, connections[0].msgtype)
             try:

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.navtech import (
     ENCODER_TICKS_PER_REV,
     OXFORD_HEADER_BYTES,
@@ -111,6 +112,17 @@ class OxfordFormScan:
     azimuths_rad: NDArray[np.float64]
     azimuth_times_ns: NDArray[np.int64]
 
+    def frame(self, timestamp_ns: int, range_resolution_m: float, sensor: str) -> RadarFrame:
+        """The scan as a `RadarFrame` with the given reference time [ns], bin size [m], sensor."""
+        return RadarFrame(
+            timestamp_ns=int(timestamp_ns),
+            polar=self.polar,
+            azimuths_rad=self.azimuths_rad,
+            range_resolution_m=range_resolution_m,
+            sensor=sensor,
+            azimuth_times_ns=self.azimuth_times_ns,
+        )
+
 
 def decode_oxford_form(
     image: NDArray[np.uint8], path: Path, ns_per_time_unit: int
@@ -150,6 +162,17 @@ def encode_oxford_form(
     header[:, 8:10] = np.asarray(encoders, dtype="<u2").reshape(n, 1).view(np.uint8)
     header[:, 10] = 255
     return np.hstack([header, np.asarray(polar, dtype=np.uint8)])
+
+
+def frame_index(index: int, length: int) -> int:
+    """`index` into a sequence of `length` frames, negative counting from the end.
+
+    Raises:
+        IndexError: index out of range.
+    """
+    if not -length <= index < length:
+        raise IndexError(f"frame {index} out of range for {length} frames")
+    return index % length
 
 
 def list_stamped_files(

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from radar_slam.datasets._io import (
     check_strictly_increasing,
     decode_oxford_form,
+    frame_index,
     list_stamped_files,
     read_gray_png,
     read_numeric_table,
@@ -177,9 +178,7 @@ class BoreasSequence:
             IndexError: index out of range.
             DatasetFormatError: unreadable PNG, wrong shape, or a corrupt header.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         path = self._paths[index]
         image = read_gray_png(path, self._shape)
         if self._shape is None:
@@ -190,14 +189,7 @@ class BoreasSequence:
                 )
             self._shape = (int(image.shape[0]), int(image.shape[1]))
         scan = decode_oxford_form(image, path, NS_PER_US)
-        return RadarFrame(
-            timestamp_ns=int(self._times_ns[index]),
-            polar=scan.polar,
-            azimuths_rad=scan.azimuths_rad,
-            range_resolution_m=self.range_resolution_m,
-            sensor=BOREAS_SENSOR,
-            azimuth_times_ns=scan.azimuth_times_ns,
-        )
+        return scan.frame(int(self._times_ns[index]), self.range_resolution_m, BOREAS_SENSOR)
 
     @property
     def timestamps_ns(self) -> NDArray[np.int64]:

@@ -34,6 +34,7 @@ from odometry import se2
 from radar_slam.datasets._io import (
     check_strictly_increasing,
     decode_oxford_form,
+    frame_index,
     list_stamped_files,
     read_gray_png,
     read_numeric_table,
@@ -243,20 +244,11 @@ class OxfordSequence:
             IndexError: index out of range.
             DatasetFormatError: unreadable PNG, wrong shape, or a corrupt header.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         path = self._paths[index]
         image = read_gray_png(path, (OXFORD_N_AZIMUTHS, OXFORD_HEADER_BYTES + OXFORD_N_BINS))
         scan = decode_oxford_form(image, path, NS_PER_US)
-        return RadarFrame(
-            timestamp_ns=int(self._times_ns[index]),
-            polar=scan.polar,
-            azimuths_rad=scan.azimuths_rad,
-            range_resolution_m=self.range_resolution_m,
-            sensor=OXFORD_SENSOR,
-            azimuth_times_ns=scan.azimuth_times_ns,
-        )
+        return scan.frame(int(self._times_ns[index]), self.range_resolution_m, OXFORD_SENSOR)
 
     @property
     def timestamps_ns(self) -> NDArray[np.int64]:

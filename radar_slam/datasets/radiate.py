@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.datasets._io import check_strictly_increasing, read_gray_png
+from radar_slam.datasets._io import check_strictly_increasing, frame_index, read_gray_png
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.navtech import ENCODER_TICKS_PER_REV, encoder_to_azimuth_ccw
 from radar_slam.datasets.registry import Family, register
@@ -129,9 +129,7 @@ class RadiateSequence:
             IndexError: index out of range.
             DatasetFormatError: unreadable PNG or a shape other than 576 x 400.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         image = read_gray_png(self._paths[index], (RADIATE_N_BINS, RADIATE_N_AZIMUTHS))
         return RadarFrame(
             timestamp_ns=int(self._times_ns[index]),

@@ -38,7 +38,7 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.interfaces import Connection
 from rosbags.typesys import Stores, get_typestore
 
-from radar_slam.datasets._io import decode_oxford_form
+from radar_slam.datasets._io import decode_oxford_form, frame_index
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.mulran import interpolate_poses
 from radar_slam.datasets.navtech import (
@@ -320,9 +320,7 @@ class BagSequence:
             IndexError: index out of range.
             DatasetFormatError: a message that is not a mono8 image of the layout.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         bag_time, rank = self._places[index]
         messages = self._reader.messages(
             connections=self._connections, start=bag_time, stop=bag_time + 1

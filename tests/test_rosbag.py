@@ -250,3 +250,18 @@ def test_export_of_a_result_folder_writes_paths_and_odometry(
     expected = read_tum(run / "odometry.tum").poses[-1, 2]
     assert abs(float(yaw_from_quaternion([q.x, q.y, q.z, q.w])) - expected) < 1e-9
     assert len(_read_topic(out, "/radar_slam/gt/path")) == 1
+
+
+def test_bags_under_the_data_root_are_listed_and_opened_by_name(
+    tiny: Sequence, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "rosbag").mkdir()
+    write_sequence_bag(tiny, tmp_path / "rosbag" / "drive.bag", max_frames=5)
+    write_sequence_bag(tiny, tmp_path / "rosbag" / "drive2", "sqlite3", max_frames=6)
+    assert main(["list", "--data-root", str(tmp_path)]) == 0
+    listing = capsys.readouterr().out
+    assert "rosbag/drive.bag" in listing and "rosbag/drive2" in listing
+    assert main(["info", "rosbag/drive.bag", "--data-root", str(tmp_path)]) == 0
+    info = capsys.readouterr().out
+    assert "frames:            5" in info and "first scan check:  ok" in info
+    assert len(open_sequence("rosbag/drive2", tmp_path)) == 6

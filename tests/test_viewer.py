@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -13,6 +14,7 @@ from radar_slam.cli import main
 from radar_slam.datasets import Sequence
 from radar_slam.trajectory import read_tum
 from radar_slam.viewer import INSTALL_HINT, viewer_argv
+from raplace.warp import CartesianGrid, CartesianWarper
 
 rerun_chunk = pytest.importorskip("rerun.chunk", reason="rerun-sdk (the viewer extra) missing")
 
@@ -35,14 +37,22 @@ def last_strip(rows: list[dict[str, object]]) -> np.ndarray:
 
 
 def test_recording_holds_one_image_per_scan_and_the_final_trajectories(
-    tiny_loop_runs: Path,
+    tiny_loop_runs: Path, tiny_loop: Sequence
 ) -> None:
     rows = read_recording(tiny_loop_runs / "viewer.rrd")
     images = rows["/radar/scan"]
     assert len(images) == 177  # one Cartesian image per scan
     assert sorted(row["scan"] for row in images) == list(range(177))
-    image_format = images[0]["Image:format"]
-    assert isinstance(image_format, list) and image_format[0]["width"] == 512
+    assert images[0]["EncodedImage:media_type"] == ["image/jpeg"]
+    # The first image is scan 0 in the vehicle frame, forward up, covering its full range.
+    first = next(row for row in images if row["scan"] == 0)
+    blob = np.array(first["EncodedImage:blob"][0], dtype=np.uint8)  # type: ignore[index]
+    decoded = cv2.imdecode(blob, cv2.IMREAD_GRAYSCALE).astype(np.float32)
+    frame = tiny_loop[0]
+    warper = CartesianWarper(CartesianGrid(frame.max_range_m / 256, 512))
+    ours = warper(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
+    assert decoded.shape == (512, 512)
+    assert np.corrcoef(decoded.ravel(), np.clip(ours, 0, 255).ravel())[0, 1] > 0.95
     run = tiny_loop_runs / "folder"
     for entity, tum in (("/world/odometry", "odometry.tum"), ("/world/slam", "slam.tum")):
         final = last_strip(rows[entity])

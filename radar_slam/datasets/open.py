@@ -84,7 +84,7 @@ def open_sequence(
         family, sequence = named
         candidates = [family]
         folder = sequence_folder(root, family, sequence)
-        if folder.is_dir():
+        if folder.is_dir() or (folder.is_file() and family.detect(folder)):  # file: a ROS 1 bag
             return _open_with(family, folder, loader_options)
         looked_in.append(folder.absolute())
     path = Path(spec).expanduser()

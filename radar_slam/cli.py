@@ -15,9 +15,10 @@ import typer
 from odometry import OdometryError
 from radar_slam import __version__
 from radar_slam.errors import RadarSlamError
+from radar_slam.viewer import viewer_argv
 from raplace import RaPlaceError
 
-COMMAND_MODULES = ("data", "evaluate", "simulate", "placerec", "run", "loops")
+COMMAND_MODULES = ("data", "evaluate", "simulate", "placerec", "run", "loops", "export")
 
 app = typer.Typer(
     name="radar-slam",
@@ -58,8 +59,9 @@ def main(argv: list[str] | None = None) -> int:
     commands become one line on stderr and exit code 1; anything else is a bug and keeps its
     traceback.
     """
+    arguments = viewer_argv(sys.argv[1:] if argv is None else argv)  # issue-14: bare --viewer
     try:
-        app(args=argv, standalone_mode=True)
+        app(args=arguments, standalone_mode=True)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     except (RadarSlamError, RaPlaceError, OdometryError) as exc:

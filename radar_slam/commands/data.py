@@ -48,7 +48,7 @@ def list_sequences(root: Path) -> list[SequenceListing]:
         if not folder.is_dir():
             continue
         for child in sorted(folder.iterdir()):
-            if not (child.is_dir() and family.detect(child)):
+            if not ((child.is_dir() or child.is_file()) and family.detect(child)):  # bag files
                 continue
             spec = f"{name}/{child.name}"
             try:

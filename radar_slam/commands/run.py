@@ -12,6 +12,12 @@ from pathlib import Path
 
 import typer
 
+from radar_slam.commands.bag_options import (
+    GT_TOPIC_OPTION,
+    LAYOUT_OPTION,
+    TOPIC_OPTION,
+    reopen_with_bag_options,
+)
 from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
 from radar_slam.errors import ResultsError
 from radar_slam.outputs import (
@@ -28,9 +34,12 @@ from radar_slam.pipeline import (
     run_odometry,
 )
 from radar_slam.results import result_dir
+from radar_slam.viewer import RerunViewer, import_rerun  # issue-14
 
 SEQUENCE_ARGUMENT = typer.Argument(
-    ..., help="Sequence: family/name (mulran/KAIST01, oxford/..., synthetic/loop) or a folder."
+    ...,
+    help="Sequence: family/name (mulran/KAIST01, oxford/..., boreas/..., radiate/..., "
+    "synthetic/loop), a folder, a ROS 1 .bag or a ROS 2 bag folder.",
 )
 OUT_OPTION = typer.Option(
     None,
@@ -44,6 +53,12 @@ CONFIG_OPTION = typer.Option(
     help="YAML overrides applied on top of the defaults and configs/<family>.yaml.",
     exists=True,
     dir_okay=False,
+)
+VIEWER_OPTION = typer.Option(  # issue-14
+    None,
+    "--viewer",
+    help="Stream the run to Rerun: --viewer spawns the viewer, --viewer FILE.rrd saves a "
+    "recording (needs the viewer extra: pip install 'radar-slam[viewer]').",
 )
 MAX_FRAMES_OPTION = typer.Option(
     None, "--max-frames", min=1, help="Process only the first N scans."
@@ -71,15 +86,27 @@ def run_command(
         False, "--no-loops", help="Odometry and pose graph only, no loop closing."
     ),
     data_root: Path | None = DATA_ROOT_OPTION,
+    topic: str | None = TOPIC_OPTION,  # issue-14: ROS bag input and live viewer
+    gt_topic: str | None = GT_TOPIC_OPTION,
+    layout: str | None = LAYOUT_OPTION,
+    viewer: str | None = VIEWER_OPTION,
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
     check_out(out)
+    if viewer is not None:  # issue-14: fail before any work when rerun-sdk is missing
+        import_rerun()
     seq, settings = open_configured(sequence, data_root, config)
+    seq, settings = reopen_with_bag_options(
+        sequence, data_root, seq, settings, topic, gt_topic, layout
+    )
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
+    observer = None if viewer is None else RerunViewer(viewer, f"{seq.family}/{seq.name}")
     with progress_bar(total, f"{seq.family}/{seq.name}") as update:
-        results = Pipeline(seq, settings, max_frames=max_frames, progress=update).run()
+        results = Pipeline(
+            seq, settings, max_frames=max_frames, progress=update, observer=observer
+        ).run()
     folder = result_dir(seq.family, seq.name, out)
     write_results(folder, results)
     typer.echo(slam_summary(results), nl=False)
@@ -92,11 +119,17 @@ def odometry_command(
     config: Path | None = CONFIG_OPTION,
     max_frames: int | None = MAX_FRAMES_OPTION,
     data_root: Path | None = DATA_ROOT_OPTION,
+    topic: str | None = TOPIC_OPTION,  # issue-14: ROS bag input
+    gt_topic: str | None = GT_TOPIC_OPTION,
+    layout: str | None = LAYOUT_OPTION,
 ) -> None:
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
     check_out(out)
     seq, settings = open_configured(sequence, data_root, config)
+    seq, settings = reopen_with_bag_options(
+        sequence, data_root, seq, settings, topic, gt_topic, layout
+    )
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}", loops=False) as update:
         run = run_odometry(seq, settings, max_frames=max_frames, progress=update)

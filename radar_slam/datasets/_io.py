@@ -14,18 +14,23 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.datasets.navtech import ENCODER_TICKS_PER_REV, OXFORD_HEADER_BYTES
+from radar_slam.datasets.frame import RadarFrame
+from radar_slam.datasets.navtech import (
+    ENCODER_TICKS_PER_REV,
+    OXFORD_HEADER_BYTES,
+    encoder_to_azimuth_ccw,
+)
 from radar_slam.errors import DatasetFormatError
 
 PNG_SUFFIX = ".png"
 
 
-def read_gray_png(path: Path, shape: tuple[int, int]) -> NDArray[np.uint8]:
+def read_gray_png(path: Path, shape: tuple[int, int] | None) -> NDArray[np.uint8]:
     """Read an 8-bit single-channel PNG and check its shape.
 
     Args:
         path: the PNG file.
-        shape: required (rows, cols) of the image.
+        shape: required (rows, cols) of the image; None accepts any shape.
 
     Returns:
         (rows, cols) uint8 image, exactly as stored.
@@ -44,7 +49,7 @@ def read_gray_png(path: Path, shape: tuple[int, int]) -> NDArray[np.uint8]:
             f"{path}: expected an 8-bit single-channel PNG, got {image.dtype} with shape "
             f"{image.shape}"
         )
-    if image.shape != shape:
+    if shape is not None and image.shape != shape:
         raise DatasetFormatError(
             f"{path}: scan has shape {image.shape[0]} x {image.shape[1]}, expected "
             f"{shape[0]} x {shape[1]}"
@@ -91,6 +96,83 @@ def parse_navtech_header(image: NDArray[np.uint8], path: Path) -> NavtechHeader:
         bad = int(np.argmax(np.diff(times) < 0)) + 1
         raise DatasetFormatError(f"{path}: azimuth timestamps decrease at row {bad}")
     return NavtechHeader(times=times, encoders=encoders, valid=valid)
+
+
+@dataclass(frozen=True)
+class OxfordFormScan:
+    """An Oxford-form scan decoded into the project convention.
+
+    Attributes:
+        polar: (n_azimuths, n_bins) uint8 intensities (the image without its header columns).
+        azimuths_rad: (n_azimuths,) CCW azimuths [rad] from the encoder counts.
+        azimuth_times_ns: (n_azimuths,) header timestamps converted to [ns].
+    """
+
+    polar: NDArray[np.uint8]
+    azimuths_rad: NDArray[np.float64]
+    azimuth_times_ns: NDArray[np.int64]
+
+    def frame(self, timestamp_ns: int, range_resolution_m: float, sensor: str) -> RadarFrame:
+        """The scan as a `RadarFrame` with the given reference time [ns], bin size [m], sensor."""
+        return RadarFrame(
+            timestamp_ns=int(timestamp_ns),
+            polar=self.polar,
+            azimuths_rad=self.azimuths_rad,
+            range_resolution_m=range_resolution_m,
+            sensor=sensor,
+            azimuth_times_ns=self.azimuth_times_ns,
+        )
+
+
+def decode_oxford_form(
+    image: NDArray[np.uint8], path: Path, ns_per_time_unit: int
+) -> OxfordFormScan:
+    """Split an Oxford-form image (n_azimuths, 11 + n_bins) into polar data, azimuths and times.
+
+    The one decoder of this layout (Oxford Radar RobotCar, Boreas, MulRan `polar_oxford_form`,
+    our ROS bags): header times are in the file's unit, `ns_per_time_unit` converts them (1000
+    for microseconds, 1 for nanoseconds). The polar array is a contiguous copy.
+    """
+    header = parse_navtech_header(image, path)
+    return OxfordFormScan(
+        polar=np.ascontiguousarray(image[:, OXFORD_HEADER_BYTES:]),
+        azimuths_rad=encoder_to_azimuth_ccw(header.encoders),
+        azimuth_times_ns=header.times * ns_per_time_unit,
+    )
+
+
+def encode_oxford_form(
+    polar: NDArray[np.uint8],
+    encoders: NDArray[np.int64],
+    times: NDArray[np.int64],
+) -> NDArray[np.uint8]:
+    """The inverse of `decode_oxford_form`: prefix each azimuth row with the 11-byte header.
+
+    Args:
+        polar: (n_azimuths, n_bins) uint8.
+        encoders: (n_azimuths,) encoder counts in [0, 5600).
+        times: (n_azimuths,) int64 timestamps in the unit the reader will assume.
+
+    Returns:
+        (n_azimuths, 11 + n_bins) uint8 image; the valid flag is 255.
+    """
+    n = polar.shape[0]
+    header = np.empty((n, OXFORD_HEADER_BYTES), dtype=np.uint8)
+    header[:, 0:8] = np.asarray(times, dtype="<i8").reshape(n, 1).view(np.uint8)
+    header[:, 8:10] = np.asarray(encoders, dtype="<u2").reshape(n, 1).view(np.uint8)
+    header[:, 10] = 255
+    return np.hstack([header, np.asarray(polar, dtype=np.uint8)])
+
+
+def frame_index(index: int, length: int) -> int:
+    """`index` into a sequence of `length` frames, negative counting from the end.
+
+    Raises:
+        IndexError: index out of range.
+    """
+    if not -length <= index < length:
+        raise IndexError(f"frame {index} out of range for {length} frames")
+    return index % length
 
 
 def list_stamped_files(

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from radar_slam.datasets._io import (
     check_strictly_increasing,
+    frame_index,
     list_stamped_files,
     parse_navtech_header,
     read_gray_png,
@@ -318,9 +319,7 @@ class MulRanSequence:
             IndexError: index out of range.
             DatasetFormatError: unreadable PNG or wrong shape.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         path = self._paths[index]
         stamp = int(self._stamps[index])
         if self.scan_folder.oxford_form:

@@ -14,7 +14,7 @@ from radar_slam.datasets.registry import (
     families,
     family_folder,
 )
-from radar_slam.errors import DatasetNotFoundError
+from radar_slam.errors import ConfigError, DatasetNotFoundError
 
 SPEC_SEPARATOR = "/"
 
@@ -34,6 +34,17 @@ def _layouts_and_sources(selected: list[Family]) -> str:
         f"  {family.name}: expected {family.layout}\n    obtain it from {family.obtain}"
         for family in selected
     )
+
+
+def _open_with(family: Family, path: Path, options: dict[str, object]) -> RadarSequence:
+    """`family.open(path, **options)`, refusing options the family does not take."""
+    foreign = sorted(set(options) - set(family.options))
+    if foreign:
+        raise ConfigError(
+            f"dataset.{foreign[0]} does not apply to the {family.name} family (it takes: "
+            f"{', '.join(family.options)})"
+        )
+    return family.open(path, **options)
 
 
 def sequence_folder(root: Path, family: Family, sequence: str) -> Path:
@@ -73,14 +84,14 @@ def open_sequence(
         family, sequence = named
         candidates = [family]
         folder = sequence_folder(root, family, sequence)
-        if folder.is_dir():
-            return family.open(folder, **loader_options)
+        if folder.is_dir() or (folder.is_file() and family.detect(folder)):  # file: a ROS 1 bag
+            return _open_with(family, folder, loader_options)
         looked_in.append(folder.absolute())
     path = Path(spec).expanduser()
-    if path.is_dir():
+    if path.is_dir() or path.is_file():  # a file: a recording such as a ROS 1 bag
         detected = detect_family(path)
         if detected is not None:
-            return detected.open(path, **loader_options)
+            return _open_with(detected, path, loader_options)
         raise DatasetNotFoundError(
             f"{path} exists but matches no known dataset layout; expected one of:\n"
             f"{_layouts_and_sources(candidates)}"
@@ -92,7 +103,7 @@ def open_sequence(
                 continue
             folder = family_folder(root, family.name) / spec.strip(SPEC_SEPARATOR)
             if folder.is_dir() and family.detect(folder):
-                return family.open(folder, **loader_options)
+                return _open_with(family, folder, loader_options)
             looked_in.append(folder.absolute())
     places = "\n".join(f"  {place}" for place in dict.fromkeys(looked_in))
     known = ", ".join(sorted(families())) or "none registered"

@@ -32,8 +32,9 @@ from numpy.typing import NDArray
 
 from radar_slam.datasets._io import (
     check_strictly_increasing,
+    decode_oxford_form,
+    frame_index,
     list_stamped_files,
-    parse_navtech_header,
     read_gray_png,
     read_numeric_table,
 )
@@ -44,7 +45,6 @@ from radar_slam.datasets.navtech import (
     OXFORD_N_BINS,
     OXFORD_RANGE_RESOLUTION_M,
     SCAN_RATE_HZ,
-    encoder_to_azimuth_ccw,
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
@@ -244,20 +244,11 @@ class OxfordSequence:
             IndexError: index out of range.
             DatasetFormatError: unreadable PNG, wrong shape, or a corrupt header.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         path = self._paths[index]
         image = read_gray_png(path, (OXFORD_N_AZIMUTHS, OXFORD_HEADER_BYTES + OXFORD_N_BINS))
-        header = parse_navtech_header(image, path)
-        return RadarFrame(
-            timestamp_ns=int(self._times_ns[index]),
-            polar=np.ascontiguousarray(image[:, OXFORD_HEADER_BYTES:]),
-            azimuths_rad=encoder_to_azimuth_ccw(header.encoders),
-            range_resolution_m=self.range_resolution_m,
-            sensor=OXFORD_SENSOR,
-            azimuth_times_ns=header.times * NS_PER_US,
-        )
+        scan = decode_oxford_form(image, path, NS_PER_US)
+        return scan.frame(int(self._times_ns[index]), self.range_resolution_m, OXFORD_SENSOR)
 
     @property
     def timestamps_ns(self) -> NDArray[np.int64]:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from radar_slam.datasets.frame import RadarSequence
 
@@ -33,9 +33,20 @@ class DatasetConfig:
         range_resolution_m: size of one range bin [m]; None keeps the loader's own value (Oxford:
             0.0438 from the dataset documentation, while the official SDK hard-codes 0.0432;
             MulRan: 0.05952; synthetic: the simulated sensor's).
+        topic, gt_topic: ROS bags: the scan image topic (None: the only mono8 image topic) and
+            an Odometry / PoseStamped ground-truth topic.
+        layout: ROS bags: image layout preset ("radar-slam", "navtech", "mulran").
+        rows, azimuth_direction: ROS bags: override the preset ("azimuths" or "bins" per row;
+            "cw" or "ccw" seen from above).
     """
 
     range_resolution_m: float | None = None
+    # ROS bags only (radar_slam.datasets.rosbag): scan and GT topics, image layout.
+    topic: str | None = None
+    gt_topic: str | None = None
+    layout: str | None = None
+    rows: Literal["azimuths", "bins"] | None = None
+    azimuth_direction: Literal["cw", "ccw"] | None = None
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""
@@ -58,6 +69,7 @@ class Family:
         detect_priority: families with a higher priority are tried first when detecting a
             folder's format, so a specialised layout (synthetic, a MulRan layout plus a marker
             file) wins over the general one it extends.
+        options: the `DatasetConfig` keys `open` accepts.
     """
 
     name: str
@@ -67,6 +79,7 @@ class Family:
     obtain: str
     resolve: Callable[[Path, str], Path] | None = None
     detect_priority: int = 0
+    options: tuple[str, ...] = ("range_resolution_m",)
 
 
 _FAMILIES: dict[str, Family] = {}

@@ -36,6 +36,7 @@ from radar_slam.loops import (
     make_loop_detector,
 )
 from radar_slam.pipeline.config import PipelineConfig
+from radar_slam.pipeline.observer import PipelineObserver
 from radar_slam.pipeline.records import (
     Progress,
     ProgressCallback,
@@ -65,6 +66,8 @@ class Pipeline:
         loop_detector: a detector to use instead of the configured one (e.g. one with another
             place recognizer or verifier); it must not have seen scans yet. Its keys are the scan
             indices.
+        observer: watches the run scan by scan (e.g. the live viewer); see
+            `radar_slam.pipeline.observer.PipelineObserver`.
     """
 
     def __init__(
@@ -74,8 +77,10 @@ class Pipeline:
         max_frames: int | None = None,
         progress: ProgressCallback | None = None,
         loop_detector: LoopDetectorProtocol | None = None,
+        observer: PipelineObserver | None = None,
     ) -> None:
         self.sequence = sequence
+        self.observer = observer
         self.config = PipelineConfig() if config is None else config
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
@@ -101,10 +106,15 @@ class Pipeline:
             loops = self._detect_loops(frame, result)
             self._close_loops(loops)
             self._report(index + 1)
+            if self.observer is not None:
+                self.observer.on_scan(self, frame, result)
         self._close_loops(self._resolve_pending())
         self._optimise()
         self._review_loops()
-        return self._evaluate(time.perf_counter() - self._start)
+        results = self._evaluate(time.perf_counter() - self._start)
+        if self.observer is not None:
+            self.observer.on_finish(results)
+        return results
 
     # -- per-scan steps -----------------------------------------------------------------------
     def _read(self, index: int) -> RadarFrame:

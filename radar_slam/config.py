@@ -29,16 +29,36 @@ def configs_dir() -> Path:
     return _PACKAGE_CONFIGS if _PACKAGE_CONFIGS.is_dir() else _SOURCE_CONFIGS
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A SafeLoader that rejects a key given twice in one mapping (YAML would keep the last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: set[Any] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)  # type: ignore[no-untyped-call]
+            if isinstance(key, typing.Hashable) and key in seen:
+                line = key_node.start_mark.line + 1
+                raise ConfigError(f"line {line}: key {key!r} is given twice")
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_yaml(path: Path) -> dict[str, Any]:
-    """Read a YAML mapping; an empty file is an empty mapping."""
+    """Read a YAML mapping (UTF-8, no key given twice); an empty file is an empty mapping."""
     try:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not a UTF-8 text file (byte {exc.start}); a config is YAML text"
+        ) from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader subclass)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML ({exc})") from None
+        raise ConfigError(f"{path}: not valid YAML ({_one_line(exc)})") from None
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -53,9 +73,11 @@ def merge(
 ) -> T:
     """Return `base` with `overrides` applied, recursively for nested dataclasses.
 
-    Raises ConfigError for keys that `cls` does not have or values of the wrong type; the
-    message names the source `where` (a file path) and the key path, e.g.
-    "my.yaml: odometry.keyframe: unknown key 'max_distanc'".
+    Raises ConfigError for keys that `cls` does not have, values of the wrong type, or values
+    out of range (the ValueError of a dataclass's `__post_init__` checks); the message names the
+    source `where` (a file path) and the key path, e.g.
+    "my.yaml: odometry.keyframe: unknown key 'max_distanc'" or
+    "my.yaml: odometry.keyframe.max_translation_m: must be a positive number, got -1.0".
     """
     if not isinstance(overrides, dict):
         raise ConfigError(f"{_at(where, keys)}: expected a mapping, got {type(overrides).__name__}")
@@ -72,7 +94,15 @@ def merge(
             changes[key] = merge(hint, current, value, where, (*keys, key))  # type: ignore[arg-type]
         else:
             changes[key] = _coerce(value, hint, _at(where, (*keys, key)))
-    return dataclasses.replace(base, **changes)  # type: ignore[type-var]
+    try:
+        return dataclasses.replace(base, **changes)  # type: ignore[type-var]
+    except ValueError as exc:  # a range check of the dataclass's __post_init__: "field: ..."
+        raise ConfigError(f"{_at(where, keys)}{'.' if keys else ': '}{exc}") from None
+
+
+def _one_line(exc: Exception) -> str:
+    """An exception's text on one line (PyYAML messages span several)."""
+    return " ".join(str(exc).split())
 
 
 def _at(where: str, keys: tuple[str, ...]) -> str:

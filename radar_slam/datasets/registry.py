@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from radar_slam.datasets.frame import Sequence
+from raplace import checks
 
 DATA_ROOT_ENV = "RADAR_SLAM_DATA"
 DEFAULT_DATA_ROOT = Path("data")
@@ -25,6 +26,10 @@ class DatasetConfig:
     """
 
     range_resolution_m: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.range_resolution_m is not None:
+            checks.positive("range_resolution_m", self.range_resolution_m)
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import typer
 
-from radar_slam.errors import ResultsError
 from radar_slam.metrics import (
     DEFAULT_MAX_TIME_DIFF_NS,
     DEFAULT_RPE_DELTA,
@@ -17,6 +16,7 @@ from radar_slam.metrics import (
     TrajectoryMetrics,
     evaluate,
 )
+from radar_slam.results import check_output_file, write_text_atomically
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
 
 NS_PER_MS = 1_000_000
@@ -112,8 +112,8 @@ def eval_command(
         raise typer.BadParameter(
             "give at least one estimate and the ground truth", param_hint="TRAJECTORIES"
         )
-    if json_path is not None and json_path.exists() and not force:
-        raise ResultsError(f"{json_path}: file exists; pass --force to overwrite it")
+    if json_path is not None:
+        check_output_file(json_path, "--json", force)
     *est_paths, gt_path = trajectories
     formats = [
         detect_format(p) if fmt == TrajectoryFormat.auto else fmt.value for p in trajectories
@@ -143,7 +143,7 @@ def eval_command(
             f"{min(KITTI_SEGMENT_LENGTHS_M):.0f} m between matched poses; shown as n/a"
         )
     if json_path is not None:
-        json_path.write_text(json.dumps(metrics_json(results), indent=2) + "\n")
+        write_text_atomically(json_path, json.dumps(metrics_json(results), indent=2) + "\n")
         typer.echo(f"wrote {json_path}")
 
 

@@ -49,7 +49,12 @@ from radar_slam.placerec import (
     with_exclusion,
 )
 from radar_slam.plots import plot_pr_curves
-from radar_slam.results import result_dir
+from radar_slam.results import (
+    DEFAULT_RESULTS_ROOT,
+    check_out_folder,
+    check_writable,
+    write_result_dir,
+)
 from raplace.config import ExclusionConfig, RaPlaceConfig
 
 log = logging.getLogger(__name__)
@@ -263,6 +268,10 @@ def pr_command(
     ),
 ) -> None:
     """Precision-recall of loop detection (intra-session) or relocalisation (--map)."""
+    if out is not None:
+        check_out_folder(out)
+    else:
+        check_writable(DEFAULT_RESULTS_ROOT, "the results folder")
     cfg = load_config(config_path)
     query = evaluated_frames(open_sequence(sequence_spec, data_root), max_frames)
     if map_spec is None:
@@ -275,8 +284,9 @@ def pr_command(
         warn_overridden_exclusion(cfg, exclusion)
     cfg = with_exclusion(cfg, exclusion)
     evaluation = run_evaluation(query, reference, method.methods(), cfg, criterion_m)
-    folder = result_dir(RESULTS_FAMILY, evaluation.folder_name, out)
-    write_results(folder, evaluation, cfg)
+    folder = write_result_dir(
+        RESULTS_FAMILY, evaluation.folder_name, lambda f: write_results(f, evaluation, cfg), out
+    )
     typer.echo(evaluation.header)
     typer.echo(format_table(evaluation.curves, evaluation.matches))
     typer.echo(f"wrote {folder}")

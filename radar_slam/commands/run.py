@@ -16,7 +16,6 @@ import typer
 from tqdm import tqdm
 
 from radar_slam.commands.data import DATA_ROOT_OPTION
-from radar_slam.errors import ResultsError
 from radar_slam.outputs import (
     odometry_summary,
     slam_summary,
@@ -32,7 +31,7 @@ from radar_slam.pipeline import (
     open_configured,
     run_odometry,
 )
-from radar_slam.results import result_dir
+from radar_slam.results import check_out_folder, check_result_location, write_result_dir
 
 SEQUENCE_ARGUMENT = typer.Argument(
     ..., help="Sequence: family/name (mulran/KAIST01, oxford/..., synthetic/loop) or a folder."
@@ -70,12 +69,6 @@ def progress_bar(total: int, description: str, loops: bool = True) -> Iterator[P
         yield update
 
 
-def check_out(out: Path | None) -> None:
-    """Fail before any work when `--out` exists and is not an empty folder."""
-    if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise ResultsError(f"{out}: output folder exists and is not empty; choose another --out")
-
-
 def without_loops(config: PipelineConfig) -> PipelineConfig:
     """`config` with loop closing disabled (recorded as such in config.yaml)."""
     loop_closure = dataclasses.replace(config.loop_closure, enabled=False)
@@ -93,15 +86,16 @@ def run_command(
     data_root: Path | None = DATA_ROOT_OPTION,
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
-    check_out(out)
+    if out is not None:
+        check_out_folder(out)
     seq, settings = open_configured(sequence, data_root, config)
+    check_result_location(seq.family, seq.name, out)  # before the run, not after it
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}") as update:
         results = Pipeline(seq, settings, max_frames=max_frames, progress=update).run()
-    folder = result_dir(seq.family, seq.name, out)
-    write_results(folder, results)
+    folder = write_result_dir(seq.family, seq.name, lambda f: write_results(f, results), out)
     typer.echo(slam_summary(results), nl=False)
     typer.echo(f"results in {folder}")
 
@@ -115,13 +109,14 @@ def odometry_command(
 ) -> None:
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
-    check_out(out)
+    if out is not None:
+        check_out_folder(out)
     seq, settings = open_configured(sequence, data_root, config)
+    check_result_location(seq.family, seq.name, out)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}", loops=False) as update:
         run = run_odometry(seq, settings, max_frames=max_frames, progress=update)
-    folder = result_dir(seq.family, seq.name, out)
-    write_odometry_results(folder, run)
+    folder = write_result_dir(seq.family, seq.name, lambda f: write_odometry_results(f, run), out)
     typer.echo(odometry_summary(run), nl=False)
     typer.echo(f"results in {folder}")
 

@@ -150,7 +150,8 @@ def generate_sequence(
 ) -> GeneratedSequence:
     """Generate `scenario` into `folder` (created; files in it are overwritten).
 
-    The completion marker is written last, so a folder without it is a half-written sequence.
+    The completion marker is written first saying "complete": false and rewritten last saying
+    true, so a half-written sequence says so.
 
     Args:
         scenario: what to simulate.
@@ -174,6 +175,13 @@ def generate_sequence(
         )
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    marker = {
+        "simulator_version": SIM_VERSION,
+        "scenario": scenario.name,
+        "seed": scene.seed,
+        "frames": n_frames,
+    }
+    write_json(folder / COMPLETE_MARKER, {**marker, "complete": False})  # until the end
     renderer = make_renderer(scene)
     ends = scene.scan_end_offsets_ns(n_frames)
     stamps = scenario.start_ns + ends
@@ -228,15 +236,7 @@ def generate_sequence(
         },
     }
     write_json(folder / WORLD_FILE, description)
-    write_json(
-        folder / COMPLETE_MARKER,
-        {
-            "simulator_version": SIM_VERSION,
-            "scenario": scenario.name,
-            "seed": scene.seed,
-            "frames": n_frames,
-        },
-    )
+    write_json(folder / COMPLETE_MARKER, {**marker, "complete": True})
     logger.info(
         "%s: %d scans, %.0f m in %.1f s", folder, n_frames, summary.length_m, summary.seconds
     )

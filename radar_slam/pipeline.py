@@ -152,6 +152,8 @@ class SlamMetrics:
     (`ate_origin_*_m`) [m]; drifts are KITTI-style mean translation errors over 100..800 m
     segments [%] and rotation errors [deg/100 m]; `ate_reduction` = 1 - ate_slam / ate_odometry.
     Fields needing ground truth are None without it (drift also below 100 m of path).
+    `scans_with_gt` is how many scans the accuracy figures were computed over, and
+    `scans_without_gt` how many had no ground truth (outside its time span).
     """
 
     frames: int
@@ -172,6 +174,8 @@ class SlamMetrics:
     drift_slam_pct: float | None
     drift_odometry_deg_per_100m: float | None
     drift_slam_deg_per_100m: float | None
+    scans_with_gt: int | None = None
+    scans_without_gt: int | None = None
 
     def to_dict(self) -> dict[str, float | int | None]:
         return asdict(self)
@@ -503,6 +507,8 @@ def summarise(
         drift_slam_pct=None if slam is None else slam.drift_trans_pct,
         drift_odometry_deg_per_100m=None if odometry is None else odometry.drift_rot_deg_per_100m,
         drift_slam_deg_per_100m=None if slam is None else slam.drift_rot_deg_per_100m,
+        scans_with_gt=None if odometry is None else odometry.poses_matched,
+        scans_without_gt=None if odometry is None else frames - odometry.poses_matched,
     )
 
 
@@ -543,6 +549,8 @@ class OdometryRun:
         }
         if self.metrics is not None:
             data.update(self.metrics.to_dict())
+            data["scans_with_gt"] = self.metrics.poses_matched
+            data["scans_without_gt"] = frames - self.metrics.poses_matched
         return data
 
 

@@ -215,6 +215,18 @@ class OxfordSequence:
                     f"{timestamps_path}: {len(missing)} of {len(paths)} listed scans are missing "
                     f"from {radar} (first: {missing[0]})"
                 )
+            listed = {path.name for path in paths}
+            unlisted = sorted(
+                p.name for p in radar.iterdir() if p.suffix == ".png" and p.name not in listed
+            )
+            if unlisted:
+                logger.warning(
+                    "%s: ignored %d scan(s) of %s not listed in it (first: %s)",
+                    timestamps_path,
+                    len(unlisted),
+                    radar,
+                    unlisted[0],
+                )
         else:
             logger.info("%s absent: taking the scan list from %s", timestamps_path, radar)
             scan_us, paths = list_stamped_files(radar)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from radar_slam.errors import TrajectoryError
 from radar_slam.metrics import (
     DEFAULT_MAX_TIME_DIFF_NS,
     DEFAULT_RPE_DELTA,
@@ -125,13 +126,16 @@ def eval_command(
         trajectory_names(est_paths), est_paths, formats[:-1], strict=True
     ):
         est: Trajectory = read_trajectory(path, path_fmt)
-        results[name] = evaluate(
-            est,
-            gt,
-            by=association,
-            max_diff_ns=round(max_diff_ms * NS_PER_MS),
-            rpe_delta=rpe_delta,
-        )
+        try:
+            results[name] = evaluate(
+                est,
+                gt,
+                by=association,
+                max_diff_ns=round(max_diff_ms * NS_PER_MS),
+                rpe_delta=rpe_delta,
+            )
+        except TrajectoryError as exc:  # name the files (issue 12)
+            raise TrajectoryError(f"{path} against {gt_path}: {exc}") from None
     typer.echo(
         f"ground truth: {gt_path} ({len(gt)} poses, {gt.length_m():.1f} m); "
         f"association by {association}; RPE over {rpe_delta} frame(s)"

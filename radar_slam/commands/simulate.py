@@ -9,7 +9,7 @@ from tqdm import tqdm
 
 from radar_slam.errors import ResultsError
 from radar_slam.results import check_writable
-from radar_slam.sim.generate import build_scene, generate_sequence
+from radar_slam.sim.generate import build_scene, checked_frame_count, generate_sequence
 from radar_slam.sim.scenarios import GROUPS, SCENARIOS, expand
 from radar_slam.sim.writer import FIGURE_FILE, remove_simulated, simulator_files
 
@@ -63,6 +63,9 @@ def simulate_command(
     """Simulate a scenario and write it in the MulRan layout (polar PNGs, global_pose.csv)."""
     members = expand(scenario)
     grouped = len(members) > 1
+    scenes = [build_scene(member, seed) for member in members]  # frame counts checked first
+    for scene in scenes:
+        checked_frame_count(scene, frames)
     if grouped and out.is_dir() and force:
         names = {member.name for member in members}
         strays = [p.name for p in out.iterdir() if p.name not in names]
@@ -72,7 +75,7 @@ def simulate_command(
             _prepare_out(out / member.name, force)
     else:
         _prepare_out(out, force)
-    for member in members:
+    for member, scene in zip(members, scenes, strict=True):
         folder = out / member.name if grouped else out
         with tqdm(desc=member.name, unit="scan", leave=False) as bar:
 
@@ -80,7 +83,9 @@ def simulate_command(
                 bar.total = total
                 bar.update(done - bar.n)
 
-            summary = generate_sequence(member, folder, seed=seed, frames=frames, on_frame=advance)
+            summary = generate_sequence(
+                member, folder, seed=seed, frames=frames, on_frame=advance, scene=scene
+            )
         per_scan_ms = 1000 * (summary.seconds - summary.build_seconds) / summary.n_frames
         typer.echo(
             f"{member.name}: {summary.n_frames} scans, {summary.duration_s:.1f} s, "

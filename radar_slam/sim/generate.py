@@ -140,6 +140,21 @@ class GeneratedSequence:
     build_seconds: float
 
 
+def checked_frame_count(scene: Scene, frames: int | None) -> int:
+    """`frames`, or the whole route when None.
+
+    Raises:
+        RadarSlamError: more frames requested than the route provides, or fewer than 1.
+    """
+    n_frames = scene.n_frames if frames is None else int(frames)
+    if not 0 < n_frames <= scene.n_frames:
+        raise RadarSlamError(
+            f"scenario {scene.scenario.name!r} provides 1 to {scene.n_frames} frames, "
+            f"{n_frames} requested"
+        )
+    return n_frames
+
+
 def generate_sequence(
     scenario: Scenario,
     folder: Path,
@@ -147,6 +162,7 @@ def generate_sequence(
     frames: int | None = None,
     workers: int = 1,
     on_frame: Callable[[int, int], None] | None = None,
+    scene: Scene | None = None,
 ) -> GeneratedSequence:
     """Generate `scenario` into `folder` (created; files in it are overwritten).
 
@@ -160,19 +176,15 @@ def generate_sequence(
         frames: number of scans (default: the whole route, or the scenario's cap).
         workers: background PNG writer threads (0: write inline).
         on_frame: called with (frames done, total) after each scan.
+        scene: the scene of `scenario` and `seed` when already built (`build_scene`).
 
     Raises:
         RadarSlamError: more frames requested than the route provides.
     """
     started = time.perf_counter()
-    scene = build_scene(scenario, seed)
+    scene = build_scene(scenario, seed) if scene is None else scene
     build_seconds = time.perf_counter() - started
-    n_frames = scene.n_frames if frames is None else int(frames)
-    if not 0 < n_frames <= scene.n_frames:
-        raise RadarSlamError(
-            f"scenario {scenario.name!r} provides 1 to {scene.n_frames} frames, "
-            f"{n_frames} requested"
-        )
+    n_frames = checked_frame_count(scene, frames)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     marker = {

@@ -59,6 +59,16 @@ def results_parent(family: str, sequence: str) -> Path:
     return DEFAULT_RESULTS_ROOT / safe
 
 
+def check_output_root(out: Path | None) -> None:
+    """Before a sequence is even opened (which may generate it): `out` must be usable, or the
+    default results root creatable. `check_result_location` completes the check once the
+    sequence's name is known."""
+    if out is not None:
+        check_out_folder(out)
+    else:
+        check_writable(DEFAULT_RESULTS_ROOT, "the results folder")
+
+
 def check_result_location(family: str, sequence: str, out: Path | None = None) -> None:
     """Fail before any work when the result folder could not be written (see `write_result_dir`)."""
     if out is not None:

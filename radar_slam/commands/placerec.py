@@ -49,12 +49,7 @@ from radar_slam.placerec import (
     with_exclusion,
 )
 from radar_slam.plots import plot_pr_curves
-from radar_slam.results import (
-    DEFAULT_RESULTS_ROOT,
-    check_out_folder,
-    check_writable,
-    write_result_dir,
-)
+from radar_slam.results import check_output_root, write_result_dir
 from raplace.config import ExclusionConfig, RaPlaceConfig
 
 log = logging.getLogger(__name__)
@@ -268,10 +263,7 @@ def pr_command(
     ),
 ) -> None:
     """Precision-recall of loop detection (intra-session) or relocalisation (--map)."""
-    if out is not None:
-        check_out_folder(out)
-    else:
-        check_writable(DEFAULT_RESULTS_ROOT, "the results folder")
+    check_output_root(out)
     cfg = load_config(config_path)
     query = evaluated_frames(open_sequence(sequence_spec, data_root), max_frames)
     if map_spec is None:

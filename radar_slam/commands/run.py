@@ -31,7 +31,7 @@ from radar_slam.pipeline import (
     open_configured,
     run_odometry,
 )
-from radar_slam.results import check_out_folder, check_result_location, write_result_dir
+from radar_slam.results import check_output_root, check_result_location, write_result_dir
 
 SEQUENCE_ARGUMENT = typer.Argument(
     ..., help="Sequence: family/name (mulran/KAIST01, oxford/..., synthetic/loop) or a folder."
@@ -86,8 +86,7 @@ def run_command(
     data_root: Path | None = DATA_ROOT_OPTION,
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
-    if out is not None:
-        check_out_folder(out)
+    check_output_root(out)
     seq, settings = open_configured(sequence, data_root, config)
     check_result_location(seq.family, seq.name, out)  # before the run, not after it
     if no_loops:
@@ -109,8 +108,7 @@ def odometry_command(
 ) -> None:
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
-    if out is not None:
-        check_out_folder(out)
+    check_output_root(out)
     seq, settings = open_configured(sequence, data_root, config)
     check_result_location(seq.family, seq.name, out)
     total = frame_count(seq, max_frames)

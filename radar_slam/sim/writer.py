@@ -145,8 +145,9 @@ _SIMULATOR_FILES = (STAMP_FILE, GLOBAL_POSE_FILE, WORLD_FILE, COMPLETE_MARKER, F
 def simulator_files(folder: Path) -> tuple[list[Path], list[Path]]:
     """The files under `folder` split into (written by the simulator, anything else).
 
-    The simulator's are `<digits>.png` scans in the polar folder and the fixed files of the
-    layout (the stamp list, global_pose.csv, world.json, the marker, the figure).
+    The simulator's are `<digits>.png` scans in the polar folder, the fixed files of the
+    layout (the stamp list, global_pose.csv, world.json, the marker, the figure) and the
+    temporary `.<name>.partial-<pid>` a killed `write_json` may leave.
     """
     ours: list[Path] = []
     others: list[Path] = []
@@ -156,7 +157,8 @@ def simulator_files(folder: Path) -> tuple[list[Path], list[Path]]:
         if path.is_dir() and not path.is_symlink():
             continue
         scan = path.parent == scans and path.suffix == ".png" and path.stem.isdigit()
-        (ours if path in own or scan else others).append(path)
+        temporary = path.parent == folder and path.name.startswith(".") and ".partial-" in path.name
+        (ours if path in own or scan or temporary else others).append(path)
     return ours, others
 
 

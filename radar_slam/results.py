@@ -87,7 +87,8 @@ def _free_name(parent: Path, now: datetime | None) -> Path:
     return folder
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """True while process `pid` exists (a temporary folder named after it is still in use)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -98,13 +99,18 @@ def _pid_alive(pid: int) -> bool:
 
 
 def remove_stale_partials(parent: Path) -> None:
-    """Delete `.<name>.partial-<pid>` folders in `parent` whose writing process has died."""
+    """Delete `.<name>.partial-<pid>` folders (and links) in `parent` whose writing process
+    has died."""
     if not parent.is_dir():
         return
     for partial in parent.glob(f".*{PARTIAL_SUFFIX}*"):
         pid_text = partial.name.rsplit(PARTIAL_SUFFIX, 1)[-1]
-        if partial.is_dir() and pid_text.isdigit() and not _pid_alive(int(pid_text)):
-            logger.info("removing interrupted result folder %s", partial)
+        if not pid_text.isdigit() or pid_alive(int(pid_text)):
+            continue
+        logger.info("removing %s, left by an interrupted run", partial)
+        if partial.is_symlink() or not partial.is_dir():  # a `latest` link being replaced
+            partial.unlink(missing_ok=True)
+        else:
             shutil.rmtree(partial, ignore_errors=True)
 
 

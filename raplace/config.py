@@ -131,7 +131,7 @@ class ExclusionConfig:
 
     def __post_init__(self) -> None:
         checks.at_least("recent_keyframes", self.recent_keyframes, 0)
-        checks.non_negative("recent_seconds", self.recent_seconds, allow_inf=True)
+        checks.non_negative("recent_seconds", self.recent_seconds)
 
 
 @dataclass(frozen=True)

@@ -3,6 +3,7 @@ naming the file (or option), no traceback, and no file changed or created anywhe
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Callable
 from pathlib import Path
@@ -83,6 +84,18 @@ CASES: dict[str, Setup] = {
     "eval --max-diff-ms -1": lambda w, r: (
         ["eval", _tum(w, "a.tum", TUM_OK), _tum(w, "b.tum", TUM_OK), "--max-diff-ms", "-1"],
         ["--max-diff-ms"],
+    ),
+    "eval --max-diff-ms inf": lambda w, r: (
+        ["eval", _tum(w, "a.tum", TUM_OK), _tum(w, "b.tum", TUM_OK), "--max-diff-ms", "inf"],
+        ["--max-diff-ms"],
+    ),
+    "pr --criterion inf": lambda w, r: (
+        ["pr", "synthetic/tiny", "--criterion", "inf", "--data-root", r],
+        ["--criterion"],
+    ),
+    "pr --exclude-seconds inf": lambda w, r: (
+        ["pr", "synthetic/tiny", "--exclude-seconds", "inf", "--data-root", r],
+        ["--exclude-seconds"],
     ),
     "pr --criterion -1": lambda w, r: (
         ["pr", "synthetic/tiny", "--criterion", "-1", "--data-root", r],
@@ -351,3 +364,27 @@ def test_zeroed_navtech_headers_name_the_file(
     assert_one_line_error(outcome, first.name, "header")
     assert tree_state(workdir) == before
     assert np.all(image[:, :11] == 0)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root may write into read-only folders")
+@pytest.mark.parametrize("command", ["run", "odometry"])
+def test_read_only_output_location(
+    command: str,
+    tiny: Sequence,
+    synthetic_root: Path,
+    workdir: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    locked = workdir / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        before = tree_state(workdir, synthetic_root)
+        target = locked / "res"
+        outcome = run_cli(
+            capsys, command, "synthetic/tiny", "--out", target, "--data-root", synthetic_root
+        )
+        assert_one_line_error(outcome, "locked", "not writable")
+        assert tree_state(workdir, synthetic_root) == before
+    finally:
+        locked.chmod(0o700)

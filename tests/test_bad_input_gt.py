@@ -130,7 +130,8 @@ def test_eval_reads_integer_tum_stamps(
     start_ns = 1_564_718_976_161_407_000
     t = start_ns + np.arange(8, dtype=np.int64) * 250_000_000
     gt = Trajectory(t, np.column_stack([np.arange(8.0), np.zeros(8), np.zeros(8)]))
-    est = Trajectory(t, gt.poses + np.column_stack([np.zeros(8), 0.1 * np.sin(np.arange(8)), np.zeros(8)]))
+    error = np.column_stack([np.zeros(8), 0.1 * np.sin(np.arange(8)), np.zeros(8)])
+    est = Trajectory(t, gt.poses + error)
     write_tum(tmp_path / "gt.tum", gt)
     write_tum(tmp_path / "est.tum", est)
     scale = 10**9 // per_second

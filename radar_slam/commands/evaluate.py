@@ -77,6 +77,10 @@ def metrics_json(results: dict[str, TrajectoryMetrics]) -> dict[str, object]:
     return {name: metrics.to_dict() for name, metrics in results.items()}
 
 
+MAX_DIFF_MS = 1e9
+"""Upper bound of --max-diff-ms (rejects inf, which has no nanosecond count)."""
+
+
 def eval_command(
     trajectories: list[Path] = typer.Argument(
         ...,
@@ -101,6 +105,7 @@ def eval_command(
         DEFAULT_MAX_TIME_DIFF_NS / NS_PER_MS,
         "--max-diff-ms",
         min=0.0,
+        max=MAX_DIFF_MS,
         help="TUM association tolerance between timestamps, in milliseconds.",
     ),
 ) -> None:

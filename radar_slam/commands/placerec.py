@@ -222,6 +222,10 @@ def warn_overridden_exclusion(cfg: RaPlaceConfig, exclusion: ExclusionConfig) ->
             )
 
 
+MAX_OPTION_VALUE = 1e9
+"""Upper bound of the distance [m] and time [s] options (rejects inf, which JSON cannot hold)."""
+
+
 def pr_command(
     sequence_spec: str = typer.Argument(
         ..., metavar="SEQ", help="Query sequence: family/sequence or a folder path."
@@ -237,6 +241,7 @@ def pr_command(
         DEFAULT_CRITERION_M,
         "--criterion",
         min=0.0,
+        max=MAX_OPTION_VALUE,
         help="Revisit criterion: a match is true within this distance [m] (10/20/50 in papers).",
     ),
     exclude_recent: int = typer.Option(
@@ -249,6 +254,7 @@ def pr_command(
         0.0,
         "--exclude-seconds",
         min=0.0,
+        max=MAX_OPTION_VALUE,
         help="Intra-session: frames less than this many seconds older are excluded too.",
     ),
     out: Path | None = typer.Option(

@@ -25,7 +25,7 @@ from radar_slam.datasets.mulran import MulRanSequence
 from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
 from radar_slam.datasets.registry import Family, family_folder, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
-from radar_slam.results import check_writable
+from radar_slam.results import check_writable, pid_alive
 
 logger = logging.getLogger(__name__)
 
@@ -66,21 +66,11 @@ def is_synthetic_sequence(folder: Path) -> bool:
     return folder.is_dir() and (folder / COMPLETE_MARKER).is_file()
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _remove_stale_partials(base: Path, name: str) -> None:
     """Delete temporary folders of `name` left by generations whose process has died."""
     for partial in base.glob(f".{name}{PARTIAL_SUFFIX}*"):
         pid_text = partial.name.rsplit(PARTIAL_SUFFIX, 1)[-1]
-        if not pid_text.isdigit() or not _pid_alive(int(pid_text)) or int(pid_text) == os.getpid():
+        if not pid_text.isdigit() or not pid_alive(int(pid_text)) or int(pid_text) == os.getpid():
             logger.info("removing interrupted generation %s", partial)
             shutil.rmtree(partial, ignore_errors=True)
 

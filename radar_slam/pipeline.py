@@ -116,6 +116,8 @@ def open_configured(
     config = load_config(sequence.family, path)
     if config.dataset.loader_options():
         sequence = open_sequence(spec, data_root, config.dataset)
+    _ = sequence.ground_truth  # a malformed GT file fails now, not after the run (issue 12)
+    _ = sequence[0]  # ... and so does a first scan of the wrong shape or format
     return sequence, config
 
 

@@ -35,6 +35,35 @@ def _bytes(path: Path, data: bytes) -> Path:
     return path
 
 
+def _tiny_with(change: Callable[[Path], object], command: str = "run") -> Setup:
+    """A copy of synthetic/tiny altered by `change(folder)`, given to `command`."""
+
+    def setup(work: Path, root: Path) -> tuple[list[str | Path], list[str]]:
+        folder = work / "seq"
+        shutil.copytree(root / "synthetic" / "tiny", folder)
+        expected = change(folder)
+        return [command, folder, "--out", work / "res"], [str(expected)]
+
+    return setup
+
+
+def _append(relative: str, text: str) -> Callable[[Path], object]:
+    def change(folder: Path) -> object:
+        with (folder / relative).open("a") as handle:
+            handle.write(text)
+        return relative
+
+    return change
+
+
+def _remove(relative: str) -> Callable[[Path], object]:
+    def change(folder: Path) -> object:
+        (folder / relative).unlink()
+        return folder.name
+
+    return change
+
+
 def _results_is_a_file(command: str) -> Setup:
     def setup(work: Path, root: Path) -> tuple[list[str | Path], list[str]]:
         _file(work / "results")
@@ -224,6 +253,15 @@ CASES: dict[str, Setup] = {
         ["info", _file(w / "empty" / "x.txt").parent],
         ["empty"],
     ),
+    "malformed global_pose.csv (before the run)": _tiny_with(_append("global_pose.csv", "1,2\n")),
+    "non-numeric global_pose.csv": _tiny_with(
+        _append("global_pose.csv", "9" * 19 + ",x" + ",0" * 11 + "\n"), "odometry"
+    ),
+    "global_pose.csv out of order": _tiny_with(
+        _append("global_pose.csv", "1" + ",0" * 12 + "\n"), "odometry"
+    ),
+    "stamp list with text": _tiny_with(_append("sensor_data/navtech_top_stamp.csv", "soon\n")),
+    "marker removed, scans kept": _tiny_with(_remove("sim_complete.json")),
     # ---- trajectory files
     "eval: one file": lambda w, r: (["eval", _tum(w, "a.tum", TUM_OK)], ["ground truth"]),
     "eval: non-numeric": lambda w, r: (

@@ -174,7 +174,7 @@ def read_global_pose(path: Path) -> tuple[NDArray[np.int64], NDArray[np.float64]
         DatasetFormatError: wrong column count, non-numeric or NaN entries, unsorted or
             duplicated times.
     """
-    ints, values = read_numeric_table(path, GLOBAL_POSE_COLUMNS, int_columns=(0,))
+    ints, values = read_numeric_table(path, GLOBAL_POSE_COLUMNS, int_columns=(0,), header_rows=1)
     times = ints[:, 0]
     check_strictly_increasing(times, path, "timestamp")
     yaw = np.arctan2(values[:, GP_COL_R10], values[:, GP_COL_R00])
@@ -248,7 +248,7 @@ def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDAr
 
 def _read_stamp_list(path: Path) -> NDArray[np.int64]:
     """Read navtech_top_stamp.csv: one t_ns per line, strictly increasing."""
-    ints, _ = read_numeric_table(path, 1, int_columns=(0,))
+    ints, _ = read_numeric_table(path, 1, int_columns=(0,), header_rows=1)
     stamps = ints[:, 0]
     check_strictly_increasing(stamps, path, "timestamp")
     return stamps
@@ -366,8 +366,8 @@ class MulRanSequence:
     def ground_truth(self) -> NDArray[np.float64] | None:
         """(N, 3) T_world_radar (x, y, yaw) at each scan time, MulRan world frame; None without GT.
 
-        Read and interpolated on first access. Rows are NaN for scans more than 0.5 s outside
-        the GT time span.
+        Read and interpolated on first access. Rows are NaN for scans more than one GT sample
+        period outside the GT time span.
         """
         if self.gt_path is None:
             return None

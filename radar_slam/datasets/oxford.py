@@ -88,7 +88,9 @@ def is_oxford_sequence(folder: Path) -> bool:
 
 def read_radar_timestamps(path: Path) -> NDArray[np.int64]:
     """Read `radar.timestamps` ("<t_us> <flag>" lines): (N,) int64 scan times [us], increasing."""
-    ints, _ = read_numeric_table(path, TIMESTAMPS_COLUMNS, int_columns=(0,), delimiter=None)
+    ints, _ = read_numeric_table(
+        path, TIMESTAMPS_COLUMNS, int_columns=(0,), header_rows=1, delimiter=None
+    )
     stamps = ints[:, 0]
     check_strictly_increasing(stamps, path, "timestamp")
     return stamps

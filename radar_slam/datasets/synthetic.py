@@ -59,11 +59,11 @@ def is_complete(folder: Path, scenario: str | None = None) -> bool:
 
 
 def is_synthetic_sequence(folder: Path) -> bool:
-    """True for a folder written by the simulator (its marker file present, complete or not:
-    `open_synthetic` refuses an incomplete one rather than another loader reading it)."""
-    from radar_slam.sim.writer import COMPLETE_MARKER
+    """True for a folder written by the simulator (its marker or world.json present, complete
+    or not: `open_synthetic` refuses an incomplete one rather than another loader reading it)."""
+    from radar_slam.sim.writer import COMPLETE_MARKER, WORLD_FILE
 
-    return folder.is_dir() and (folder / COMPLETE_MARKER).is_file()
+    return folder.is_dir() and any((folder / f).is_file() for f in (COMPLETE_MARKER, WORLD_FILE))
 
 
 def _remove_stale_partials(base: Path, name: str) -> None:

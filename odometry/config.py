@@ -66,7 +66,8 @@ class LevelConfig:
     def __post_init__(self) -> None:
         checks.positive("cell_m", self.cell_m)
         checks.at_least("size_px", self.size_px, MIN_IMAGE_PX)
-        checks.in_range("taper_fraction", self.taper_fraction, 0.0, 1.0)
+        checks.even("size_px", self.size_px)
+        checks.in_range("taper_fraction", self.taper_fraction, 0.0, 1.0, open_low=True)
 
 
 @dataclass(frozen=True)

@@ -65,6 +65,12 @@ def at_least(name: str, value: int, minimum: int) -> None:
         raise ValueError(f"{name}: must be an integer >= {minimum}, got {value}")
 
 
+def even(name: str, value: int) -> None:
+    """`value` is an even integer."""
+    if isinstance(value, bool) or not isinstance(value, int) or value % 2:
+        raise ValueError(f"{name}: must be an even integer, got {value!r}")
+
+
 def less(low_name: str, low: float, high_name: str, high: float) -> None:
     """`low` < `high` (e.g. a minimum and a maximum range)."""
     if not _number(low_name, low) < _number(high_name, high):

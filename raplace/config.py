@@ -21,6 +21,8 @@ T = TypeVar("T")
 
 IntensityTransform = Literal["linear", "log1p", "square"]
 MagnitudeTransform = Literal["linear", "sqrt", "log1p"]
+MIN_POSE_N_THETA = 4
+"""Fewest sinogram angles of the pose estimate (an even count: angles pair up across pi)."""
 MAX_DISTANCE = 2.0
 """Largest RaPlace distance (1 - normalised cross-correlation): the bound of `loop_threshold`."""
 
@@ -112,6 +114,7 @@ class DescriptorConfig:
         checks.at_least("theta_oversample", self.theta_oversample, 1)
         checks.at_least("n_freq", self.n_freq, 1)
         checks.positive("max_freq_cpm", self.max_freq_cpm)
+        checks.in_range("max_freq_cpm", self.max_freq_cpm, 0.0, 0.5 / self.image.cell_m)  # Nyquist
         checks.at_least("pad_factor", self.pad_factor, 1)
         checks.one_of("magnitude", self.magnitude, typing.get_args(MagnitudeTransform))
 
@@ -197,7 +200,8 @@ class PoseConfig:
     refine_iterations: int = 1
 
     def __post_init__(self) -> None:
-        checks.at_least("n_theta", self.n_theta, 1)
+        checks.at_least("n_theta", self.n_theta, MIN_POSE_N_THETA)
+        checks.even("n_theta", self.n_theta)
         checks.at_least("pad_factor", self.pad_factor, 1)
         checks.in_range("whitening", self.whitening, 0.0, 1.0)
         checks.at_least("shift_upsample", self.shift_upsample, 1)
@@ -248,6 +252,19 @@ class RaPlaceConfig:
     retrieval: RetrievalConfig = field(default_factory=RetrievalConfig)
     pose: PoseConfig = field(default_factory=PoseConfig)
     scancontext: ScanContextConfig = field(default_factory=ScanContextConfig)
+
+    def __post_init__(self) -> None:
+        n_theta, pool = self.descriptor.n_theta, self.retrieval.coarse_theta_pool
+        if n_theta % pool:
+            raise ValueError(
+                f"retrieval.coarse_theta_pool: must divide descriptor.n_theta ({n_theta}), "
+                f"got {pool}"
+            )
+        if self.retrieval.coarse_n_freq > self.descriptor.n_freq:
+            raise ValueError(
+                f"retrieval.coarse_n_freq: must be at most descriptor.n_freq "
+                f"({self.descriptor.n_freq}), got {self.retrieval.coarse_n_freq}"
+            )
 
 
 def to_dict(config: Any) -> dict[str, Any]:

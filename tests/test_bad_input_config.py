@@ -57,6 +57,21 @@ CONFIG_CASES = [
     ("dataset: {range_resolution_m: -0.05}", "dataset.range_resolution_m"),
     ("odometry: {coarse: {size_px: 0}}", "odometry.coarse.size_px"),
     ("odometry: {fine: {cell_m: -1}}", "odometry.fine.cell_m"),
+    ("odometry: {coarse: {size_px: 9}}", "odometry.coarse.size_px"),
+    ("odometry: {coarse: {taper_fraction: 0}}", "odometry.coarse.taper_fraction"),
+    (
+        "loop_closure: {raplace: {descriptor: {max_freq_cpm: 100}}}",
+        "loop_closure.raplace.descriptor.max_freq_cpm",
+    ),
+    (
+        "loop_closure: {raplace: {retrieval: {coarse_theta_pool: 7}}}",
+        "loop_closure.raplace.retrieval.coarse_theta_pool",
+    ),
+    (
+        "loop_closure: {raplace: {retrieval: {coarse_n_freq: 64}}}",
+        "loop_closure.raplace.retrieval.coarse_n_freq",
+    ),
+    ("loop_closure: {raplace: {pose: {n_theta: 5}}}", "loop_closure.raplace.pose.n_theta"),
     ("odometry: {rotation: {n_angles: 0}}", "odometry.rotation.n_angles"),
     ("odometry: {rotation: {min_frequency: 0.9, max_frequency: 0.5}}", "min_frequency"),
     ("odometry: {translation: {whitening: 2}}", "odometry.translation.whitening"),

@@ -96,7 +96,12 @@ class EvaluatedFrames:
     def frames(self, description: str) -> Iterator[tuple[int, RadarFrame]]:
         """(evaluated index, frame), loaded lazily, with a frames/s progress bar on stderr."""
         for position in tqdm(
-            range(len(self)), desc=description, unit="frame", dynamic_ncols=True, leave=False
+            range(len(self)),
+            desc=description,
+            unit="frame",
+            dynamic_ncols=True,
+            leave=False,
+            disable=None,
         ):
             yield position, self.sequence[int(self.indices[position])]
 

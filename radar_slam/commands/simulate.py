@@ -77,7 +77,7 @@ def simulate_command(
         _prepare_out(out, force)
     for member, scene in zip(members, scenes, strict=True):
         folder = out / member.name if grouped else out
-        with tqdm(desc=member.name, unit="scan", leave=False) as bar:
+        with tqdm(desc=member.name, unit="scan", leave=False, disable=None) as bar:
 
             def advance(done: int, total: int, bar: tqdm = bar) -> None:
                 bar.total = total

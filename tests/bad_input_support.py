@@ -21,7 +21,7 @@ class CliOutcome:
     stderr: str
 
 
-def run_cli(capsys: pytest.CaptureFixture[str], *args: str | Path) -> CliOutcome:
+def run_cli(capsys: pytest.CaptureFixture[str], *args: str | Path | int) -> CliOutcome:
     """`radar-slam ARGS` in this process (a bug would propagate as its exception)."""
     capsys.readouterr()
     code = main([str(a) for a in args])
@@ -64,3 +64,17 @@ def assert_one_line_error(outcome: CliOutcome, *expected: str) -> str:
     for text in expected:
         assert text in lines[0], (text, lines[0])
     return lines[0]
+
+
+def assert_refused(
+    capsys: pytest.CaptureFixture[str],
+    roots: tuple[Path, ...],
+    args: list[str | Path],
+    *expected: str,
+) -> str:
+    """`radar-slam ARGS` fails with one line naming `expected` and changes nothing under
+    `roots`; returns the line."""
+    before = tree_state(*roots)
+    line = assert_one_line_error(run_cli(capsys, *args), *expected)
+    assert tree_state(*roots) == before
+    return line

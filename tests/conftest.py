@@ -85,3 +85,10 @@ def tiny_loop(synthetic_root: Path) -> Sequence:
     """`synthetic/tiny_loop`: a small loop with a revisit, 177 scans of 1024 bins (generated in a
     few seconds)."""
     return open_sequence("synthetic/tiny_loop", synthetic_root)
+
+
+@pytest.fixture()
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty current folder (a default results/ folder would be written here)."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path

@@ -8,9 +8,10 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
 import pytest
-from bad_input_support import assert_one_line_error, run_cli, tree_state
+from bad_input_support import (
+    assert_refused,
+)
 
 from radar_slam.datasets.frame import Sequence
 
@@ -307,12 +308,6 @@ CASES: dict[str, Setup] = {
 }
 
 
-@pytest.fixture()
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
-
-
 @pytest.mark.parametrize("case", list(CASES))
 def test_bad_input_is_one_line_and_changes_nothing(
     case: str,
@@ -322,10 +317,7 @@ def test_bad_input_is_one_line_and_changes_nothing(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     args, expected = CASES[case](workdir, synthetic_root)
-    before = tree_state(workdir, synthetic_root)
-    outcome = run_cli(capsys, *args)
-    assert_one_line_error(outcome, *expected)
-    assert tree_state(workdir, synthetic_root) == before
+    assert_refused(capsys, (workdir, synthetic_root), args, *expected)
 
 
 # ---------------------------------------------------------------- simulated sequences on disk
@@ -342,11 +334,9 @@ def test_incomplete_simulated_sequence_is_refused(
     folder = _copy_tiny(tiny, workdir / "half")
     marker = folder / "sim_complete.json"
     marker.write_text(marker.read_text().replace('"complete": true', '"complete": false'))
-    before = tree_state(workdir)
-    for command in (["info", folder], ["run", folder, "--max-frames", "2"]):
-        outcome = run_cli(capsys, *command)
-        assert_one_line_error(outcome, "half", "incomplete", "--force")
-    assert tree_state(workdir) == before
+    commands: list[list[str | Path]] = [["info", folder], ["run", folder, "--max-frames", "2"]]
+    for command in commands:
+        assert_refused(capsys, (workdir,), command, "half", "incomplete", "--force")
 
 
 def test_simulated_sequence_missing_a_scan_is_refused(
@@ -355,10 +345,8 @@ def test_simulated_sequence_missing_a_scan_is_refused(
     folder = _copy_tiny(tiny, workdir / "gap")
     scans = sorted((folder / "sensor_data/radar/polar").glob("*.png"))
     scans[5].unlink()
-    before = tree_state(workdir)
-    outcome = run_cli(capsys, "info", folder)
-    assert_one_line_error(outcome, "gap", f"{len(scans) - 1} scans found", f"{len(scans)}")
-    assert tree_state(workdir) == before
+    expected = (f"{len(scans) - 1} scans found", f"{len(scans)}")
+    assert_refused(capsys, (workdir,), ["info", folder], "gap", *expected)
 
 
 def test_simulate_force_keeps_a_users_file(
@@ -366,10 +354,8 @@ def test_simulate_force_keeps_a_users_file(
 ) -> None:
     folder = _copy_tiny(tiny, workdir / "sim")
     _file(folder / "my_notes.txt")
-    before = tree_state(workdir)
-    outcome = run_cli(capsys, "simulate", "tiny", "--out", folder, "--force", "--frames", "2")
-    assert_one_line_error(outcome, "sim", "my_notes.txt")
-    assert tree_state(workdir) == before
+    args: list[str | Path] = ["simulate", "tiny", "--out", folder, "--force", "--frames", "2"]
+    assert_refused(capsys, (workdir,), args, "sim", "my_notes.txt")
 
 
 def test_regenerating_synthetic_never_deletes_a_users_file(
@@ -380,10 +366,8 @@ def test_regenerating_synthetic_never_deletes_a_users_file(
     folder = _copy_tiny(tiny, root / "synthetic" / "tiny")
     (folder / "sim_complete.json").unlink()
     _file(folder / "my_notes.txt")
-    before = tree_state(workdir)
-    outcome = run_cli(capsys, "info", "synthetic/tiny", "--data-root", root)
-    assert_one_line_error(outcome, "tiny", "my_notes.txt")
-    assert tree_state(workdir) == before
+    args: list[str | Path] = ["info", "synthetic/tiny", "--data-root", root]
+    assert_refused(capsys, (workdir,), args, "tiny", "my_notes.txt")
 
 
 def test_zeroed_navtech_headers_name_the_file(
@@ -395,13 +379,10 @@ def test_zeroed_navtech_headers_name_the_file(
     shutil.copytree(oxford_dir, folder)
     first = sorted((folder / "radar").glob("*.png"))[0]
     image = cv2.imread(str(first), cv2.IMREAD_UNCHANGED)
+    assert image is not None
     image[:, :11] = 0
     assert cv2.imwrite(str(first), image)
-    before = tree_state(workdir)
-    outcome = run_cli(capsys, "info", folder)
-    assert_one_line_error(outcome, first.name, "header")
-    assert tree_state(workdir) == before
-    assert np.all(image[:, :11] == 0)
+    assert_refused(capsys, (workdir,), ["info", folder], first.name, "header")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root may write into read-only folders")
@@ -417,12 +398,9 @@ def test_read_only_output_location(
     locked.mkdir()
     locked.chmod(0o500)
     try:
-        before = tree_state(workdir, synthetic_root)
-        target = locked / "res"
-        outcome = run_cli(
-            capsys, command, "synthetic/tiny", "--out", target, "--data-root", synthetic_root
-        )
-        assert_one_line_error(outcome, "locked", "not writable")
-        assert tree_state(workdir, synthetic_root) == before
+        args: list[str | Path] = [command, "synthetic/tiny", "--out", locked / "res"]
+        roots = (workdir, synthetic_root)
+        args += ["--data-root", synthetic_root]
+        assert_refused(capsys, roots, args, "locked", "not writable")
     finally:
         locked.chmod(0o700)

@@ -6,7 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from bad_input_support import assert_one_line_error, run_cli, tree_state
+from bad_input_support import (
+    assert_refused,
+)
 
 from radar_slam.datasets.frame import Sequence
 
@@ -98,13 +100,6 @@ CONFIG_CASES = [
 ]
 
 
-@pytest.fixture()
-def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """An empty current folder (results/ would be written here)."""
-    monkeypatch.chdir(tmp_path)
-    return tmp_path
-
-
 @pytest.mark.parametrize(("text", "key"), CONFIG_CASES)
 def test_bad_config_is_one_line_and_writes_nothing(
     text: str,
@@ -116,12 +111,10 @@ def test_bad_config_is_one_line_and_writes_nothing(
 ) -> None:
     config = workdir / "bad.yaml"
     config.write_text(text)
-    before = tree_state(workdir, synthetic_root)
-    outcome = run_cli(
-        capsys, "run", "synthetic/tiny", "--config", config, "--data-root", synthetic_root
+    args: list[str | Path] = ["run", "synthetic/tiny", "--config", config]
+    assert_refused(
+        capsys, (workdir, synthetic_root), [*args, "--data-root", synthetic_root], "bad.yaml", key
     )
-    assert_one_line_error(outcome, "bad.yaml", key)
-    assert tree_state(workdir, synthetic_root) == before
 
 
 def test_non_utf8_config(
@@ -129,12 +122,14 @@ def test_non_utf8_config(
 ) -> None:
     config = workdir / "latin1.yaml"
     config.write_bytes("odometry: {keyframe: {max_frames: 3}}  # \xe9t\xe9\n".encode("latin-1"))
-    before = tree_state(workdir, synthetic_root)
-    outcome = run_cli(
-        capsys, "odometry", "synthetic/tiny", "--config", config, "--data-root", synthetic_root
+    args: list[str | Path] = ["odometry", "synthetic/tiny", "--config", config]
+    assert_refused(
+        capsys,
+        (workdir, synthetic_root),
+        [*args, "--data-root", synthetic_root],
+        "latin1.yaml",
+        "UTF-8",
     )
-    assert_one_line_error(outcome, "latin1.yaml", "UTF-8")
-    assert tree_state(workdir, synthetic_root) == before
 
 
 @pytest.mark.parametrize("command", ["run", "odometry", "loops"])
@@ -151,19 +146,9 @@ def test_config_errors_of_every_command_name_the_file(
     graph.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n")
     head = [command, graph] if command == "loops" else [command]
     tail = ["--out", workdir / "out.g2o"] if command == "loops" else []
-    before = tree_state(workdir, synthetic_root)
-    outcome = run_cli(
-        capsys,
-        *head,
-        "synthetic/tiny",
-        "--config",
-        config,
-        "--data-root",
-        synthetic_root,
-        *tail,
-    )
-    assert_one_line_error(outcome, "neg.yaml", "odometry.preprocess.bin_size_m", "-1")
-    assert tree_state(workdir, synthetic_root) == before
+    args = [*head, "synthetic/tiny", "--config", config, "--data-root", synthetic_root, *tail]
+    expected = ("neg.yaml", "odometry.preprocess.bin_size_m", "-1")
+    assert_refused(capsys, (workdir, synthetic_root), args, *expected)
 
 
 def test_pr_config_error_names_file_and_key(
@@ -171,9 +156,6 @@ def test_pr_config_error_names_file_and_key(
 ) -> None:
     config = workdir / "pr.yaml"
     config.write_text("retrieval: {loop_threshold: -1}\n")
-    before = tree_state(workdir, synthetic_root)
-    outcome = run_cli(
-        capsys, "pr", "synthetic/tiny", "--config", config, "--data-root", synthetic_root
-    )
-    assert_one_line_error(outcome, "pr.yaml", "retrieval.loop_threshold")
-    assert tree_state(workdir, synthetic_root) == before
+    args: list[str | Path] = ["pr", "synthetic/tiny", "--config", config]
+    args += ["--data-root", synthetic_root]
+    assert_refused(capsys, (workdir, synthetic_root), args, "pr.yaml", "retrieval.loop_threshold")

@@ -36,11 +36,11 @@ from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.preprocess import preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
-from odometry.se2 import between, compose, inverse
+from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
-NS_PER_S = 1e9
 FloatArray = NDArray[np.float64]
 TWIST_REFRESH_MPS = 0.25
 """A new keyframe is re-rendered when its de-skew velocity is off by more than this [m/s]."""
@@ -264,9 +264,9 @@ class Odometry:
             ),
         )
         motion = between(previous.pose, pose)
-        covariance = _rotate_covariance(
+        covariance = rotate_covariance(
             _factor_covariance(estimate.covariance, reference, node),
-            between(previous.pose, reference.pose),
+            float(between(previous.pose, reference.pose)[2]),
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
@@ -300,7 +300,7 @@ class Odometry:
         qcfg = self.config.quality
         expected = between(reference.image_pose, predicted)
         off = estimate.motion - expected
-        off_yaw = abs(float(np.arctan2(np.sin(off[2]), np.cos(off[2]))))
+        off_yaw = abs(float(wrap_angle(off[2])))
         if np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m and off_yaw <= np.deg2rad(
             qcfg.max_prediction_error_deg
         ):
@@ -489,15 +489,11 @@ def _factor_covariance(
     """Covariance (reference axes) of `node`'s pose in `reference`'s frame: the registration of
     the image frames (reference image axes) plus both conversions to reference times."""
     return (
-        _rotate_covariance(registration_covariance, between(reference.pose, reference.image_pose))
+        rotate_covariance(
+            registration_covariance, float(between(reference.pose, reference.image_pose)[2])
+        )
         + reference.conversion_covariance
-        + _rotate_covariance(node.conversion_covariance, between(reference.pose, node.pose))
+        + rotate_covariance(
+            node.conversion_covariance, float(between(reference.pose, node.pose)[2])
+        )
     )
-
-
-def _rotate_covariance(covariance: FloatArray, frame_in_target: FloatArray) -> FloatArray:
-    """A covariance (3, 3) whose translation is in one frame, expressed in the axes of a target
-    frame in which that frame has pose `frame_in_target` (3,)."""
-    c, s = np.cos(frame_in_target[2]), np.sin(frame_in_target[2])
-    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return rot @ covariance @ rot.T

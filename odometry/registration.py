@@ -57,11 +57,11 @@ from odometry.rotation import (
     signature,
 )
 from odometry.scan import Scan
-from odometry.se2 import compose, inverse, wrap_angle
+from raplace.se2 import compose, inverse, rotate_covariance, wrap_angle
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
-NS_PER_S = 1e9
 FloatArray = NDArray[np.float64]
 
 
@@ -230,14 +230,6 @@ def image_to_reference(
 ) -> FloatArray:
     """T_ref_cur between the scans' reference times from T between their image frames."""
     return compose(compose(ref.image_pose, image_motion), inverse(cur.image_pose))
-
-
-def rotate_covariance(covariance: FloatArray, yaw_rad: float) -> FloatArray:
-    """A (3, 3) covariance whose translation is in a frame turned by `yaw_rad` relative to the
-    one wanted, expressed in the wanted frame (x, y, yaw order)."""
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return rot @ covariance @ rot.T
 
 
 def register_images(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> MotionEstimate:

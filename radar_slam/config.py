@@ -1,15 +1,12 @@
-"""Strict configuration loading: dataclass defaults in code, YAML files only override.
+"""YAML config files: read, merge onto the dataclass defaults (strictly), write.
 
 Every stage owns a dataclass of its settings (`raplace.config.RaPlaceConfig`, ...). A YAML file is
-merged on top of the defaults; an unknown key or a value of the wrong type is a `ConfigError`
-naming the file and the key path, never silently dropped.
+merged on top of the defaults by the one strict reader, `raplace.config_io.merge`; an unknown key
+or a value of the wrong type is a `ConfigError` naming the file and the key path.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import sys
-import types
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
@@ -17,6 +14,8 @@ from typing import Any, TypeVar
 import yaml
 
 from radar_slam.errors import ConfigError
+from raplace import config_io
+from raplace.config_io import ConfigReadError, to_dict
 
 T = TypeVar("T")
 
@@ -71,100 +70,16 @@ def read_yaml(path: Path) -> dict[str, Any]:
 def merge(
     cls: type[T], base: T, overrides: dict[str, Any], where: str, keys: tuple[str, ...] = ()
 ) -> T:
-    """Return `base` with `overrides` applied, recursively for nested dataclasses.
-
-    Raises ConfigError for keys that `cls` does not have, values of the wrong type, or values
-    out of range (the ValueError of a dataclass's `__post_init__` checks); the message names the
-    source `where` (a file path) and the key path, e.g.
-    "my.yaml: odometry.keyframe: unknown key 'max_distanc'" or
-    "my.yaml: odometry.keyframe.max_translation_m: must be a positive number, got -1.0".
-    """
-    if not isinstance(overrides, dict):
-        raise ConfigError(f"{_at(where, keys)}: expected a mapping, got {type(overrides).__name__}")
-    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    hints = typing.get_type_hints(cls, globalns=vars(sys.modules[cls.__module__]))
-    changes: dict[str, Any] = {}
-    for key, value in overrides.items():
-        if key not in fields:
-            known = ", ".join(sorted(fields))
-            raise ConfigError(f"{_at(where, keys)}: unknown key {key!r} (known: {known})")
-        hint = hints[key]
-        current = getattr(base, key)
-        if dataclasses.is_dataclass(hint):
-            changes[key] = merge(hint, current, value, where, (*keys, key))  # type: ignore[arg-type]
-        else:
-            changes[key] = _coerce(value, hint, _at(where, (*keys, key)))
+    """`raplace.config_io.merge`, raising `ConfigError` (a `RadarSlamError`)."""
     try:
-        return dataclasses.replace(base, **changes)  # type: ignore[type-var]
-    except ValueError as exc:  # a range check of the dataclass's __post_init__: "field: ..."
-        raise ConfigError(f"{_at(where, keys)}{'.' if keys else ': '}{exc}") from None
+        return config_io.merge(cls, base, overrides, where, keys)
+    except ConfigReadError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def _one_line(exc: Exception) -> str:
     """An exception's text on one line (PyYAML messages span several)."""
     return " ".join(str(exc).split())
-
-
-def _at(where: str, keys: tuple[str, ...]) -> str:
-    """`where` followed by the dotted key path, for error messages."""
-    return f"{where}: {'.'.join(keys)}" if keys else where
-
-
-def _coerce(value: Any, hint: Any, where: str) -> Any:
-    origin = typing.get_origin(hint)
-    args = typing.get_args(hint)
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for arg in args:
-            if arg is type(None):
-                continue
-            try:
-                return _coerce(value, arg, where)
-            except ConfigError as exc:
-                errors.append(str(exc))
-        raise ConfigError(errors[0] if errors else f"{where}: bad value {value!r}")
-    if origin is typing.Literal:
-        if value not in args:
-            raise ConfigError(f"{where}: {value!r} is not one of {list(args)}")
-        return value
-    if origin in (tuple, list):
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
-        item = args[0] if args else Any
-        items = [_coerce(v, item, where) for v in value]
-        return tuple(items) if origin is tuple else items
-    if hint is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where}: expected a number, got {value!r}")
-        return float(value)
-    if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {value!r}")
-        return value
-    if hint is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {value!r}")
-        return value
-    if hint is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
-        return value
-    return value
-
-
-def to_dict(config: Any) -> dict[str, Any]:
-    """A plain dict of a config dataclass, tuples turned into lists (for YAML/JSON output)."""
-
-    def plain(v: Any) -> Any:
-        if isinstance(v, dict):
-            return {k: plain(x) for k, x in v.items()}
-        if isinstance(v, (list, tuple)):
-            return [plain(x) for x in v]
-        return v
-
-    return plain(dataclasses.asdict(config))
 
 
 def write_yaml(config: Any, path: Path) -> None:

@@ -27,15 +27,15 @@ from typing import Any
 
 import numpy as np
 
-from odometry.se2 import compose
 from radar_slam.config import write_yaml
 from radar_slam.errors import TrajectoryError
+from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
 from radar_slam.g2o import write_pose_graph
 from radar_slam.loops import LoopDecision
-from radar_slam.metrics import associate, umeyama_alignment_se2
-from radar_slam.pipeline import OdometryRun, Results
+from radar_slam.pipeline.records import OdometryRun, Results
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory, write_kitti, write_tum
+from raplace.se2 import compose
 
 log = logging.getLogger(__name__)
 

@@ -22,15 +22,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.se2 import accumulate, relative_motions, wrap_angle
 from radar_slam.errors import TrajectoryError
+from raplace.se2 import accumulate, relative_motions, wrap_angle
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-NS_PER_S = 1_000_000_000
 TUM_COLUMNS = 8
 KITTI_COLUMNS = 12
 COMMENT_PREFIX = "#"

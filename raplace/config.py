@@ -2,22 +2,17 @@
 
 `RaPlaceConfig` groups the sections; each stage receives only its own section
 (`DescriptorExtractor(cfg.descriptor)`, `PlaceRecognizer(cfg.retrieval)`,
-`PoseEstimator(cfg.pose)`, `ScanContextRecognizer(cfg.scancontext)`). YAML overrides are merged by
-`radar_slam.config.merge`; `from_dict` below is the package's own strict reader (used to restore a
-saved database) so that raplace never imports radar_slam.
+`PoseEstimator(cfg.pose)`, `ScanContextRecognizer(cfg.scancontext)`). Mappings are read onto these
+defaults by the one strict reader, `raplace.config_io`.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import sys
 import typing
 from dataclasses import dataclass, field
-from typing import Any, Literal, TypeVar
+from typing import Literal
 
-from raplace import RaPlaceError, checks
-
-T = TypeVar("T")
+from raplace import checks
 
 IntensityTransform = Literal["linear", "log1p", "square"]
 MagnitudeTransform = Literal["linear", "sqrt", "log1p"]
@@ -36,7 +31,7 @@ class PreprocessConfig:
     intensity transform.
 
     Attributes:
-        subtract_bin_median: subtract each range bin's median over azimuths (removes ring noise
+        ring_noise_removal: subtract each range bin's median over azimuths (removes ring noise
             and the part of the saturated near range that does not depend on azimuth); negative
             values are clipped to 0.
         min_range_m: bins closer than this are zeroed (saturated near range, the vehicle) [m].
@@ -45,7 +40,7 @@ class PreprocessConfig:
             emphasises strong returns.
     """
 
-    subtract_bin_median: bool = True
+    ring_noise_removal: bool = True
     min_range_m: float = 3.0
     noise_floor: float = 0.0
     intensity: IntensityTransform = "linear"
@@ -265,34 +260,3 @@ class RaPlaceConfig:
                 f"retrieval.coarse_n_freq: must be at most descriptor.n_freq "
                 f"({self.descriptor.n_freq}), got {self.retrieval.coarse_n_freq}"
             )
-
-
-def to_dict(config: Any) -> dict[str, Any]:
-    """A plain nested dict of a config dataclass (JSON/YAML ready)."""
-    return dataclasses.asdict(config)
-
-
-def from_dict(cls: type[T], data: dict[str, Any]) -> T:
-    """Build `cls` from a nested dict, strictly: unknown keys raise RaPlaceError.
-
-    Missing keys take the defaults; nested dataclass sections recurse; lists become tuples where
-    the field is a tuple. Values are not type-coerced beyond that (radar_slam.config.merge does
-    full validation of user files).
-    """
-    if not isinstance(data, dict):
-        raise RaPlaceError(f"{cls.__name__}: expected a mapping, got {type(data).__name__}")
-    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    hints = typing.get_type_hints(cls, globalns=vars(sys.modules[cls.__module__]))
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise RaPlaceError(f"{cls.__name__}: unknown keys {unknown} (known: {sorted(fields)})")
-    values: dict[str, Any] = {}
-    for key, value in data.items():
-        hint = hints[key]
-        if dataclasses.is_dataclass(hint):
-            values[key] = from_dict(hint, value)  # type: ignore[arg-type]
-        elif typing.get_origin(hint) is tuple and isinstance(value, list):
-            values[key] = tuple(value)
-        else:
-            values[key] = value
-    return cls(**values)

@@ -32,11 +32,11 @@ from numpy.typing import NDArray
 
 from odometry.deskew import motion_from_twist
 from odometry.odometry import Odometry, OdometryResult
-from odometry.se2 import between, compose, wrap_angle
 from radar_slam.datasets import RadarFrame, open_sequence
-from radar_slam.metrics import evaluate
+from radar_slam.evaluation.metrics import evaluate
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory
+from raplace.se2 import between, compose, wrap_angle
 from raplace.warp import polar_sample_coords, remap
 
 logger = logging.getLogger("bench_odometry")

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from raplace_scenes import oxford_scans
 
 from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 OXFORD_SEQ = SHARED_DATA / "oxford" / "2019-01-10-14-36-48-partial"
@@ -75,13 +75,13 @@ def synthetic_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def tiny(synthetic_root: Path) -> Sequence:
+def tiny(synthetic_root: Path) -> RadarSequence:
     """`synthetic/tiny`: 60 scans of 1024 bins (generated in about a second)."""
     return open_sequence("synthetic/tiny", synthetic_root)
 
 
 @pytest.fixture(scope="session")
-def tiny_loop(synthetic_root: Path) -> Sequence:
+def tiny_loop(synthetic_root: Path) -> RadarSequence:
     """`synthetic/tiny_loop`: a small loop with a revisit, 177 scans of 1024 bins (generated in a
     few seconds)."""
     return open_sequence("synthetic/tiny_loop", synthetic_root)

@@ -13,7 +13,7 @@ from bad_input_support import (
     assert_refused,
 )
 
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 
 Setup = Callable[[Path, Path], tuple[list[str | Path], list[str]]]
 """(work folder, synthetic data root) -> (arguments, texts the error line must contain)."""
@@ -311,7 +311,7 @@ CASES: dict[str, Setup] = {
 @pytest.mark.parametrize("case", list(CASES))
 def test_bad_input_is_one_line_and_changes_nothing(
     case: str,
-    tiny: Sequence,
+    tiny: RadarSequence,
     synthetic_root: Path,
     workdir: Path,
     capsys: pytest.CaptureFixture[str],
@@ -323,13 +323,13 @@ def test_bad_input_is_one_line_and_changes_nothing(
 # ---------------------------------------------------------------- simulated sequences on disk
 
 
-def _copy_tiny(tiny: Sequence, dest: Path) -> Path:
+def _copy_tiny(tiny: RadarSequence, dest: Path) -> Path:
     shutil.copytree(tiny.folder, dest)  # type: ignore[attr-defined]
     return dest
 
 
 def test_incomplete_simulated_sequence_is_refused(
-    tiny: Sequence, workdir: Path, capsys: pytest.CaptureFixture[str]
+    tiny: RadarSequence, workdir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     folder = _copy_tiny(tiny, workdir / "half")
     marker = folder / "sim_complete.json"
@@ -340,7 +340,7 @@ def test_incomplete_simulated_sequence_is_refused(
 
 
 def test_simulated_sequence_missing_a_scan_is_refused(
-    tiny: Sequence, workdir: Path, capsys: pytest.CaptureFixture[str]
+    tiny: RadarSequence, workdir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     folder = _copy_tiny(tiny, workdir / "gap")
     scans = sorted((folder / "sensor_data/radar/polar").glob("*.png"))
@@ -350,7 +350,7 @@ def test_simulated_sequence_missing_a_scan_is_refused(
 
 
 def test_simulate_force_keeps_a_users_file(
-    tiny: Sequence, workdir: Path, capsys: pytest.CaptureFixture[str]
+    tiny: RadarSequence, workdir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     folder = _copy_tiny(tiny, workdir / "sim")
     _file(folder / "my_notes.txt")
@@ -359,7 +359,7 @@ def test_simulate_force_keeps_a_users_file(
 
 
 def test_regenerating_synthetic_never_deletes_a_users_file(
-    tiny: Sequence, workdir: Path, capsys: pytest.CaptureFixture[str]
+    tiny: RadarSequence, workdir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A synthetic/<name> folder without its marker and with a user's file is not regenerated."""
     root = workdir / "data"
@@ -389,7 +389,7 @@ def test_zeroed_navtech_headers_name_the_file(
 @pytest.mark.parametrize("command", ["run", "odometry"])
 def test_read_only_output_location(
     command: str,
-    tiny: Sequence,
+    tiny: RadarSequence,
     synthetic_root: Path,
     workdir: Path,
     capsys: pytest.CaptureFixture[str],

@@ -10,7 +10,7 @@ from bad_input_support import (
     assert_refused,
 )
 
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 
 CONFIG_CASES = [
     # (YAML text, text the message must contain besides the file name)
@@ -104,7 +104,7 @@ CONFIG_CASES = [
 def test_bad_config_is_one_line_and_writes_nothing(
     text: str,
     key: str,
-    tiny: Sequence,
+    tiny: RadarSequence,
     synthetic_root: Path,
     workdir: Path,
     capsys: pytest.CaptureFixture[str],
@@ -118,7 +118,7 @@ def test_bad_config_is_one_line_and_writes_nothing(
 
 
 def test_non_utf8_config(
-    tiny: Sequence, synthetic_root: Path, workdir: Path, capsys: pytest.CaptureFixture[str]
+    tiny: RadarSequence, synthetic_root: Path, workdir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     config = workdir / "latin1.yaml"
     config.write_bytes("odometry: {keyframe: {max_frames: 3}}  # \xe9t\xe9\n".encode("latin-1"))
@@ -135,7 +135,7 @@ def test_non_utf8_config(
 @pytest.mark.parametrize("command", ["run", "odometry", "loops"])
 def test_config_errors_of_every_command_name_the_file(
     command: str,
-    tiny: Sequence,
+    tiny: RadarSequence,
     synthetic_root: Path,
     workdir: Path,
     capsys: pytest.CaptureFixture[str],
@@ -152,7 +152,7 @@ def test_config_errors_of_every_command_name_the_file(
 
 
 def test_pr_config_error_names_file_and_key(
-    tiny: Sequence, synthetic_root: Path, workdir: Path, capsys: pytest.CaptureFixture[str]
+    tiny: RadarSequence, synthetic_root: Path, workdir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     config = workdir / "pr.yaml"
     config.write_text("retrieval: {loop_threshold: -1}\n")

@@ -18,7 +18,7 @@ import pytest
 from bad_input_support import assert_one_line_error, run_cli
 
 from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.outputs import SLAM_RESULT_FILES
 from radar_slam.results import PARTIAL_SUFFIX
 
@@ -98,7 +98,7 @@ def complete(folder: Path) -> bool:
 def test_killed_run_leaves_latest_on_a_complete_result(
     sig: signal.Signals,
     point: str,
-    tiny: Sequence,
+    tiny: RadarSequence,
     synthetic_root: Path,
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,

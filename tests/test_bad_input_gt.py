@@ -13,9 +13,9 @@ import pytest
 from bad_input_support import run_cli
 
 from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.oxford import OxfordSequence
-from radar_slam.metrics import evaluate
+from radar_slam.evaluation.metrics import evaluate
 from radar_slam.trajectory import Trajectory, read_tum, write_tum
 
 FRAMES = 10
@@ -23,7 +23,7 @@ COVERED = 6
 """Scans of the tiny sequence that the truncated global_pose.csv still covers."""
 
 
-def tiny_copy(tiny: Sequence, dest: Path) -> Path:
+def tiny_copy(tiny: RadarSequence, dest: Path) -> Path:
     """A copy of the tiny simulated sequence (MulRan layout, 1024 bins)."""
     shutil.copytree(tiny.folder, dest)  # type: ignore[attr-defined]
     return dest
@@ -37,7 +37,7 @@ def truncate_gt(folder: Path, last_scan_ns: int) -> None:
 
 
 def test_scans_past_the_gt_have_none_and_ate_equals_the_full_gt_one(
-    tiny: Sequence,
+    tiny: RadarSequence,
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
@@ -103,7 +103,7 @@ def test_oxford_scan_not_in_the_timestamps_is_counted(
 
 
 def test_scan_files_with_other_names_are_counted(
-    tiny: Sequence, tmp_path: Path, caplog: pytest.LogCaptureFixture
+    tiny: RadarSequence, tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     folder = tiny_copy(tiny, tmp_path / "seq")
     polar = folder / "sensor_data" / "radar" / "polar"

@@ -8,12 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry import se2
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist
 from odometry.registration import estimate_motion
 from radar_slam.datasets import OxfordSequence
 from radar_slam.datasets.frame import RadarFrame
+from raplace import se2
+from raplace.units import NS_PER_S
 from raplace.warp import polar_sample_coords, remap
 
 pytestmark = pytest.mark.realdata
@@ -46,7 +47,7 @@ def seen_from(frame: RadarFrame, pose: np.ndarray, twist: np.ndarray | None = No
     n_az, n_bins = frame.polar.shape
     tau = np.zeros(n_az)
     if twist is not None:
-        tau = (np.arange(n_az) - 0.5 * (n_az - 1)) * (SWEEP_NS / 1e9 / n_az)
+        tau = (np.arange(n_az) - 0.5 * (n_az - 1)) * (SWEEP_NS / NS_PER_S / n_az)
     poses = (
         np.array([se2.compose(pose, motion_from_twist(twist, t)) for t in tau])
         if (twist is not None)
@@ -61,7 +62,7 @@ def seen_from(frame: RadarFrame, pose: np.ndarray, twist: np.ndarray | None = No
     bins, rows = polar_sample_coords(x, y, frame.azimuths_rad, frame.range_resolution_m)
     polar = np.clip(np.rint(remap(frame.polar, bins, rows)), 0, 255).astype(np.uint8)
     timestamp = frame.timestamp_ns + SWEEP_NS
-    times = None if twist is None else (timestamp + np.rint(tau * 1e9)).astype(np.int64)
+    times = None if twist is None else (timestamp + np.rint(tau * NS_PER_S)).astype(np.int64)
     return dataclasses.replace(frame, timestamp_ns=timestamp, polar=polar, azimuth_times_ns=times)
 
 

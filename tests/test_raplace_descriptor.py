@@ -61,7 +61,7 @@ def test_suppress_noise_removes_rings_and_near_range() -> None:
     polar[:, 120] += 80.0  # ring noise: same range at every azimuth
     polar[:, :10] = 255.0  # saturated near range
     polar[37, 60] += 100.0  # a real target
-    cfg = PreprocessConfig(subtract_bin_median=True, min_range_m=3.0)
+    cfg = PreprocessConfig(ring_noise_removal=True, min_range_m=3.0)
     clean = suppress_noise(polar, 0.5, cfg)
     assert clean[:, :6].max() == 0.0
     assert clean[:, 120].max() < 6.0

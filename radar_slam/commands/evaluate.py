@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 
 from radar_slam.errors import TrajectoryError
-from radar_slam.metrics import (
+from radar_slam.evaluation.metrics import (
     DEFAULT_MAX_TIME_DIFF_NS,
     DEFAULT_RPE_DELTA,
     KITTI_SEGMENT_LENGTHS_M,
@@ -19,8 +19,8 @@ from radar_slam.metrics import (
 )
 from radar_slam.results import check_output_file, write_text_atomically
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
+from raplace.units import NS_PER_MS
 
-NS_PER_MS = 1_000_000
 MISSING = "n/a"
 TABLE_COLUMNS = (
     ("poses", "poses_matched", "{:d}"),

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import typer
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
-from radar_slam.commands.run import progress_bar
+from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
 from radar_slam.errors import ResultsError
 from radar_slam.g2o import read_g2o, write_pose_graph
 from radar_slam.pipeline import close_loops_on_graph, open_configured
@@ -50,7 +49,7 @@ def loops_command(
     write_pose_graph(out, run.graph)
     typer.echo(
         f"{seq.family}/{seq.name}: {len(record.vertices)} vertices, {len(record.edges)} edges in; "
-        f"{len(run.loops)} verified loop proposals, {run.accepted} accepted; "
+        f"{len(run.loops)} verified loop proposals, {run.n_accepted} accepted; "
         f"{run.seconds:.1f} s"
     )
     typer.echo(f"wrote {out}")

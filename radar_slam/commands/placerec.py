@@ -28,9 +28,9 @@ import typer
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
+from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.config import merge, read_yaml, write_yaml
-from radar_slam.datasets import RadarFrame, Sequence, open_sequence
+from radar_slam.datasets import RadarFrame, RadarSequence, open_sequence
 from radar_slam.placerec import (
     DEFAULT_CRITERION_M,
     DEFAULT_EXCLUDE_RECENT,
@@ -51,13 +51,13 @@ from radar_slam.placerec import (
 from radar_slam.plots import plot_pr_curves
 from radar_slam.results import check_output_root, write_result_dir
 from raplace.config import ExclusionConfig, RaPlaceConfig
+from raplace.units import NS_PER_S
 
 log = logging.getLogger(__name__)
 
 RESULTS_FAMILY = "pr"
 MATCHES_HEADER = ("method", "query_ns", "match_ns", "distance")
 METHOD_LABELS = {"raplace": "RaPlace", "scancontext": "Scan Context"}
-NS_PER_S = 1e-9
 NUMBER_LIST = re.compile(r"\[\s*([-+0-9.eE,\snul]*?)\s*\]")
 """A JSON list holding only numbers (and null), as json.dumps(indent=...) spreads it."""
 WHITESPACE = re.compile(r"\s+")
@@ -85,7 +85,7 @@ class EvaluatedFrames:
         timestamps_ns: (n,) frame times [ns].
     """
 
-    sequence: Sequence
+    sequence: RadarSequence
     indices: NDArray[np.int64]
     xy: NDArray[np.float64]
     timestamps_ns: NDArray[np.int64]
@@ -106,11 +106,11 @@ class EvaluatedFrames:
             yield position, self.sequence[int(self.indices[position])]
 
 
-def spec_name(sequence: Sequence) -> str:
+def spec_name(sequence: RadarSequence) -> str:
     return f"{sequence.family}/{sequence.name}"
 
 
-def evaluated_frames(sequence: Sequence, max_frames: int | None) -> EvaluatedFrames:
+def evaluated_frames(sequence: RadarSequence, max_frames: int | None) -> EvaluatedFrames:
     """The first `max_frames` frames of `sequence` that have a ground-truth pose.
 
     Raises:
@@ -372,7 +372,7 @@ def run_evaluation(
     mode: Mode
     if reference is None:
         matches = match_intra_session(query.frames(f"pr {label}"), runs)
-        times_s = query.timestamps_ns.astype(np.float64) * NS_PER_S
+        times_s = query.timestamps_ns.astype(np.float64) / NS_PER_S
         counts = intra_session_candidate_counts(times_s, exclusion)
         map_frames, mode = query, "intra"
     else:

@@ -8,14 +8,11 @@ summary. The files are listed in `radar_slam.outputs`.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import typer
-from tqdm import tqdm
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
+from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
 from radar_slam.outputs import (
     odometry_summary,
     slam_summary,
@@ -25,8 +22,6 @@ from radar_slam.outputs import (
 from radar_slam.pipeline import (
     Pipeline,
     PipelineConfig,
-    Progress,
-    ProgressCallback,
     frame_count,
     open_configured,
     run_odometry,
@@ -52,29 +47,6 @@ CONFIG_OPTION = typer.Option(
 MAX_FRAMES_OPTION = typer.Option(
     None, "--max-frames", min=1, help="Process only the first N scans."
 )
-
-
-@contextmanager
-def progress_bar(total: int, description: str, loops: bool = True) -> Iterator[ProgressCallback]:
-    """A tqdm bar (frames/s, and loops accepted/rejected) driven by pipeline `Progress` reports.
-
-    Shown only when stderr is a terminal (a log file gets no bar), and erased on an error so
-    that the error is the one line left.
-    """
-    with tqdm(total=total, desc=description, unit="frame", dynamic_ncols=True, disable=None) as bar:
-
-        def update(progress: Progress) -> None:
-            bar.update(progress.done - bar.n)
-            if loops:
-                bar.set_postfix(
-                    loops=progress.loops_accepted, rejected=progress.loops_rejected, refresh=False
-                )
-
-        try:
-            yield update
-        except BaseException:
-            bar.leave = False
-            raise
 
 
 def without_loops(config: PipelineConfig) -> PipelineConfig:

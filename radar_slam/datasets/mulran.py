@@ -34,7 +34,6 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import se2
 from radar_slam.datasets._io import (
     check_strictly_increasing,
     list_stamped_files,
@@ -56,6 +55,8 @@ from radar_slam.datasets.navtech import (
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from raplace import se2
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
@@ -77,7 +78,7 @@ GLOBAL_POSE_COLUMNS = 13
 GP_COL_R00, GP_COL_X, GP_COL_R10, GP_COL_Y = 1, 4, 5, 8
 STAMP_FILES = ("sensor_data/navtech_top_stamp.csv", "navtech_top_stamp.csv")
 
-NOMINAL_SCAN_PERIOD_NS = int(round(1e9 / SCAN_RATE_HZ))
+NOMINAL_SCAN_PERIOD_NS = int(round(NS_PER_S / SCAN_RATE_HZ))
 """One revolution at 4 Hz [ns]: the scan period used when stamps cannot tell it."""
 SCAN_PERIOD_TOLERANCE = 0.2
 """A gap between radar stamps counts as one scan period if within +-20 % of the nominal one."""
@@ -241,7 +242,7 @@ def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDAr
             gt_path,
             missing,
             len(scan_stamps_ns),
-            tolerance_ns / 1e9,
+            tolerance_ns / NS_PER_S,
         )
     return se2.compose(base_at_scans, MULRAN_T_BASE_RADAR)
 

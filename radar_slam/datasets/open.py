@@ -1,4 +1,4 @@
-"""Resolve a sequence spec (`family/sequence` or a folder path) to an opened Sequence."""
+"""Resolve a sequence spec (`family/sequence` or a folder path) to an opened RadarSequence."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 
 from radar_slam.datasets import registry
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.registry import (
     DatasetConfig,
     Family,
@@ -47,7 +47,7 @@ def open_sequence(
     spec: str | os.PathLike[str],
     data_root: str | os.PathLike[str] | None = None,
     options: DatasetConfig | None = None,
-) -> Sequence:
+) -> RadarSequence:
     """Open a sequence named `family/sequence` or given as a path to its folder.
 
     `family/sequence` resolves to `<root>/<family>/<sequence>` (family folder matched

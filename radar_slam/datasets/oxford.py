@@ -30,7 +30,6 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import se2
 from radar_slam.datasets._io import (
     check_strictly_increasing,
     list_stamped_files,
@@ -49,6 +48,8 @@ from radar_slam.datasets.navtech import (
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from raplace import se2
+from raplace.units import NS_PER_US, US_PER_S
 
 logger = logging.getLogger(__name__)
 
@@ -65,8 +66,7 @@ destination_radar_timestamp."""
 COL_SOURCE_TIME, COL_X, COL_Y, COL_YAW = 0, 2, 3, 7
 ODOMETRY_INT_COLUMNS = (0, 8, 9)
 """Integer columns read exactly: source_timestamp, source_radar_ts, destination_radar_ts."""
-NS_PER_US = 1000
-NOMINAL_SCAN_PERIOD_US = int(round(1e6 / SCAN_RATE_HZ))
+NOMINAL_SCAN_PERIOD_US = int(round(US_PER_S / SCAN_RATE_HZ))
 SCAN_PERIOD_TOLERANCE = 0.2
 """A median gap between scans within +-20 % of 250 ms is taken as the scan period."""
 Y_RIGHT_TO_Y_LEFT = np.array([1.0, -1.0, -1.0])

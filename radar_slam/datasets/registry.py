@@ -1,16 +1,27 @@
-"""Registry of dataset families, addressed as `family/sequence` or by a plain folder path."""
+"""Registry of dataset families, addressed as `family/sequence` or by a plain folder path.
+
+A loader module registers its family at import (`register(Family(...))`). Families that live
+outside this package (the simulator's `synthetic`) are plug-ins: modules named by the
+`radar_slam.datasets` entry-point group (pyproject.toml), imported on the first lookup.
+"""
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from raplace import checks
 
+log = logging.getLogger(__name__)
+
+PLUGIN_GROUP = "radar_slam.datasets"
+"""Entry-point group of dataset-family plug-ins: each names a module that registers a family."""
 DATA_ROOT_ENV = "RADAR_SLAM_DATA"
 DEFAULT_DATA_ROOT = Path("data")
 
@@ -42,7 +53,7 @@ class Family:
 
     Attributes:
         name: family key, e.g. "mulran".
-        open: builds a Sequence from a sequence folder; accepts the keyword arguments of
+        open: builds a RadarSequence from a sequence folder; accepts the keyword arguments of
             `DatasetConfig.loader_options()`.
         detect: True when a folder looks like a sequence of this family.
         layout: human description of the expected folder layout (for error messages).
@@ -55,7 +66,7 @@ class Family:
     """
 
     name: str
-    open: Callable[..., Sequence]
+    open: Callable[..., RadarSequence]
     detect: Callable[[Path], bool]
     layout: str
     obtain: str
@@ -64,6 +75,7 @@ class Family:
 
 
 _FAMILIES: dict[str, Family] = {}
+_plugins_loaded = False
 
 
 def register(family: Family) -> Family:
@@ -74,8 +86,20 @@ def register(family: Family) -> Family:
     return family
 
 
+def load_plugins() -> None:
+    """Import the plug-in modules of the `radar_slam.datasets` entry points (once)."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    for plugin in entry_points(group=PLUGIN_GROUP):
+        plugin.load()
+        log.debug("dataset plug-in %s loaded from %s", plugin.name, plugin.value)
+
+
 def families() -> dict[str, Family]:
-    """All registered families by name."""
+    """All registered families by name (plug-ins included)."""
+    load_plugins()
     return dict(_FAMILIES)
 
 
@@ -100,7 +124,7 @@ def family_folder(root: Path, family: str) -> Path:
 
 def detect_family(folder: Path) -> Family | None:
     """The family whose layout `folder` matches (highest detect_priority first), or None."""
-    for family in sorted(_FAMILIES.values(), key=lambda f: -f.detect_priority):
+    for family in sorted(families().values(), key=lambda f: -f.detect_priority):
         if family.detect(folder):
             return family
     return None

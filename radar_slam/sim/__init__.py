@@ -1,8 +1,10 @@
 """Simulator of Navtech scanning-radar sequences in the MulRan layout.
 
 Modules, in pipeline order:
-    town.py       street lattice, curved roads, buildings, street furniture, parks (geometry)
-    world.py      radar scatterers and occluders of a town; parked cars, vegetation, traffic
+    town.py       layout records (roads, buildings, raster), the warped street lattice
+    townplan.py   generate_town: streets, then buildings, street furniture, parking, parks
+    scatterers.py the world's data model: scatterers, occluders, traffic, World
+    world.py      a town populated with scatterers: facades, cars, vegetation, traffic
     route.py      the ego vehicle's drive through the streets (5-15 m/s, smooth turns)
     sensor.py     scan geometry and timing (CIR204-H by default)
     physics.py    every physical effect as a named, configurable dataclass
@@ -11,7 +13,21 @@ Modules, in pipeline order:
     generate.py   build a scene and write a sequence
     writer.py     the files (polar PNGs, global_pose.csv, stamps, world.json, marker)
     figure.py     overview figure (matplotlib)
+    family.py     the `synthetic` dataset family (a plug-in of the dataset registry)
 
 Entry points: `generate.generate_sequence(scenario, folder)`, the `synthetic` dataset family
-(`radar_slam.datasets.synthetic`) and `radar-slam simulate`.
+(`radar_slam.sim.family`) and `radar-slam simulate`.
 """
+
+from radar_slam.sim.generate import GeneratedSequence, Scene, build_scene, generate_sequence
+from radar_slam.sim.scenarios import SCENARIOS, Scenario, get_scenario
+
+__all__ = [
+    "SCENARIOS",
+    "GeneratedSequence",
+    "Scenario",
+    "Scene",
+    "build_scene",
+    "generate_sequence",
+    "get_scenario",
+]

@@ -19,10 +19,11 @@ from numpy.typing import NDArray
 from radar_slam.errors import RadarSlamError
 from radar_slam.sim.render import Renderer
 from radar_slam.sim.route import Trajectory, drive, route_edges
+from radar_slam.sim.scatterers import World
 from radar_slam.sim.scenarios import Scenario
-from radar_slam.sim.sensor import NS_PER_S
-from radar_slam.sim.town import Town, generate_town
-from radar_slam.sim.world import World, build_world
+from radar_slam.sim.town import Town
+from radar_slam.sim.townplan import generate_town
+from radar_slam.sim.world import build_world
 from radar_slam.sim.writer import (
     COMPLETE_MARKER,
     WORLD_FILE,
@@ -31,6 +32,7 @@ from radar_slam.sim.writer import (
     write_json,
     write_stamps,
 )
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
@@ -155,6 +157,70 @@ def checked_frame_count(scene: Scene, frames: int | None) -> int:
     return n_frames
 
 
+def write_scans(
+    scene: Scene,
+    folder: Path,
+    n_frames: int,
+    workers: int,
+    on_frame: Callable[[int, int], None] | None,
+) -> NDArray[np.int64]:
+    """Render and write the first `n_frames` scans and their stamps; returns the scans' end
+    offsets from the scenario start [ns]."""
+    renderer = make_renderer(scene)
+    ends = scene.scan_end_offsets_ns(n_frames)
+    stamps = scene.scenario.start_ns + ends
+    with ScanWriter(folder, workers) as writer:
+        for k in range(n_frames):
+            writer.write(int(stamps[k]), render_frame(scene, renderer, k))
+            if on_frame is not None:
+                on_frame(k + 1, n_frames)
+    write_stamps(folder, stamps)
+    return ends
+
+
+def write_ground_truth(scene: Scene, folder: Path, ends: NDArray[np.int64]) -> float:
+    """Write global_pose.csv (every GT_PERIOD_NS and at every scan end); returns the path
+    length driven [m]."""
+    gt_offsets = np.union1d(np.arange(0, int(ends[-1]) + 1, GT_PERIOD_NS, dtype=np.int64), ends)
+    base = scene.base_poses(gt_offsets)
+    write_global_pose(folder, scene.scenario.start_ns + gt_offsets, base)
+    return float(np.hypot(*np.diff(base[:, :2], axis=0).T).sum())
+
+
+def world_description(scene: Scene, summary: GeneratedSequence) -> dict[str, object]:
+    """world.json: the scenario, its settings, the route and statistics of the world."""
+    scenario = scene.scenario
+    n_frames = summary.n_frames
+    return {
+        "simulator_version": SIM_VERSION,
+        "scenario": scenario.name,
+        "description": scenario.description,
+        "seed": scene.seed,
+        "session": scenario.session,
+        "frames": n_frames,
+        "start_ns": scenario.start_ns,
+        "duration_s": summary.duration_s,
+        "length_m": summary.length_m,
+        "route_length_m": scene.trajectory.length_m,
+        "origin_xy": scenario.origin_xy,
+        "waypoints": scenario.waypoints,
+        "frames_convention": "file name = time of the last azimuth; poses in global_pose.csv are "
+        "the vehicle base; T_world_radar = T_world_base * MULRAN_T_BASE_RADAR",
+        "sensor": scenario.sensor,
+        "physics": scenario.physics,
+        "town": scenario.town,
+        "objects": scenario.objects,
+        "driving": scenario.driving,
+        "world_stats": {
+            "scatterers": len(scene.world.scatterers),
+            "occluders": len(scene.world.occluders.loss_db),
+            "buildings": len(scene.town.buildings),
+            "roads": len(scene.town.roads),
+            "moving_vehicles": len(scene.world.traffic),
+        },
+    }
+
+
 def generate_sequence(
     scenario: Scenario,
     folder: Path,
@@ -194,60 +260,22 @@ def generate_sequence(
         "frames": n_frames,
     }
     write_json(folder / COMPLETE_MARKER, {**marker, "complete": False})  # until the end
-    renderer = make_renderer(scene)
-    ends = scene.scan_end_offsets_ns(n_frames)
-    stamps = scenario.start_ns + ends
     logger.info(
         "generating %s (seed %d): %d scans into %s", scenario.name, scene.seed, n_frames, folder
     )
-    with ScanWriter(folder, workers) as writer:
-        for k in range(n_frames):
-            writer.write(int(stamps[k]), render_frame(scene, renderer, k))
-            if on_frame is not None:
-                on_frame(k + 1, n_frames)
-    write_stamps(folder, stamps)
-    gt_offsets = np.union1d(np.arange(0, int(ends[-1]) + 1, GT_PERIOD_NS, dtype=np.int64), ends)
-    write_global_pose(folder, scenario.start_ns + gt_offsets, scene.base_poses(gt_offsets))
-    moved = np.hypot(*np.diff(scene.base_poses(gt_offsets)[:, :2], axis=0).T).sum()
+    ends = write_scans(scene, folder, n_frames, workers, on_frame)
+    moved = write_ground_truth(scene, folder, ends)
     summary = GeneratedSequence(
         folder=folder,
         scenario=scenario.name,
         seed=scene.seed,
         n_frames=n_frames,
         duration_s=float(ends[-1]) / NS_PER_S,
-        length_m=float(moved),
+        length_m=moved,
         seconds=time.perf_counter() - started,
         build_seconds=build_seconds,
     )
-    description = {
-        "simulator_version": SIM_VERSION,
-        "scenario": scenario.name,
-        "description": scenario.description,
-        "seed": scene.seed,
-        "session": scenario.session,
-        "frames": n_frames,
-        "start_ns": scenario.start_ns,
-        "duration_s": summary.duration_s,
-        "length_m": summary.length_m,
-        "route_length_m": scene.trajectory.length_m,
-        "origin_xy": scenario.origin_xy,
-        "waypoints": scenario.waypoints,
-        "frames_convention": "file name = time of the last azimuth; poses in global_pose.csv are "
-        "the vehicle base; T_world_radar = T_world_base * MULRAN_T_BASE_RADAR",
-        "sensor": scenario.sensor,
-        "physics": scenario.physics,
-        "town": scenario.town,
-        "objects": scenario.objects,
-        "driving": scenario.driving,
-        "world_stats": {
-            "scatterers": len(scene.world.scatterers),
-            "occluders": len(scene.world.occluders.loss_db),
-            "buildings": len(scene.town.buildings),
-            "roads": len(scene.town.roads),
-            "moving_vehicles": len(scene.world.traffic),
-        },
-    }
-    write_json(folder / WORLD_FILE, description)
+    write_json(folder / WORLD_FILE, world_description(scene, summary))
     write_json(folder / COMPLETE_MARKER, {**marker, "complete": True})
     logger.info(
         "%s: %d scans, %.0f m in %.1f s", folder, n_frames, summary.length_m, summary.seconds

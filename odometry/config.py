@@ -10,6 +10,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from raplace import checks
+
+MIN_IMAGE_PX = 8
+"""Smallest Cartesian image side accepted [pixels] (a peak fit needs a few pixels each side)."""
+
 
 @dataclass(frozen=True)
 class PreprocessConfig:
@@ -34,6 +39,14 @@ class PreprocessConfig:
     noise_floor_sigmas: float = 0.0
     gamma: float = 1.0
 
+    def __post_init__(self) -> None:
+        checks.positive("bin_size_m", self.bin_size_m)
+        checks.non_negative("min_range_m", self.min_range_m)
+        checks.positive("max_range_m", self.max_range_m)
+        checks.less("min_range_m", self.min_range_m, "max_range_m", self.max_range_m)
+        checks.finite("noise_floor_sigmas", self.noise_floor_sigmas)
+        checks.positive("gamma", self.gamma)
+
 
 @dataclass(frozen=True)
 class LevelConfig:
@@ -49,6 +62,12 @@ class LevelConfig:
     cell_m: float
     size_px: int
     taper_fraction: float = 0.3
+
+    def __post_init__(self) -> None:
+        checks.positive("cell_m", self.cell_m)
+        checks.at_least("size_px", self.size_px, MIN_IMAGE_PX)
+        checks.even("size_px", self.size_px)
+        checks.in_range("taper_fraction", self.taper_fraction, 0.0, 1.0, open_low=True)
 
 
 @dataclass(frozen=True)
@@ -85,6 +104,25 @@ class RotationConfig:
     refine_range_step_m: float = 0.5
     refine_smoothing_bins: float = 2.0
 
+    def __post_init__(self) -> None:
+        checks.at_least("n_angles", self.n_angles, 2)
+        checks.at_least("n_radii", self.n_radii, 2)
+        checks.in_range("min_frequency", self.min_frequency, 0.0, 1.0)
+        checks.in_range("max_frequency", self.max_frequency, 0.0, 1.0, open_low=True)
+        checks.less("min_frequency", self.min_frequency, "max_frequency", self.max_frequency)
+        checks.non_negative("smoothing_bins", self.smoothing_bins)
+        checks.at_least("refine_n_angles", self.refine_n_angles, 2)
+        checks.non_negative("refine_min_range_m", self.refine_min_range_m)
+        checks.positive("refine_max_range_m", self.refine_max_range_m)
+        checks.less(
+            "refine_min_range_m",
+            self.refine_min_range_m,
+            "refine_max_range_m",
+            self.refine_max_range_m,
+        )
+        checks.positive("refine_range_step_m", self.refine_range_step_m)
+        checks.non_negative("refine_smoothing_bins", self.refine_smoothing_bins)
+
 
 @dataclass(frozen=True)
 class TranslationConfig:
@@ -104,6 +142,11 @@ class TranslationConfig:
     whitening: float = 1.0
     fine_search_px: int = 6
     use_fine: bool = True
+
+    def __post_init__(self) -> None:
+        checks.non_negative("smoothing_px", self.smoothing_px)
+        checks.in_range("whitening", self.whitening, 0.0, 1.0)
+        checks.at_least("fine_search_px", self.fine_search_px, 1)
 
 
 @dataclass(frozen=True)
@@ -142,6 +185,26 @@ class QualityConfig:
     gap_sigma_yaw_deg: float = 5.0
     velocity_lag_fraction: float = 0.25
 
+    def __post_init__(self) -> None:
+        for name in (
+            "min_peak_quality",
+            "max_coarse_fine_disagreement_m",
+            "max_speed_mps",
+            "max_yaw_rate_dps",
+            "max_prediction_error_m",
+            "max_prediction_error_deg",
+        ):
+            checks.non_negative(name, getattr(self, name), allow_inf=True)
+        for name in (
+            "min_sigma_xy_m",
+            "min_sigma_yaw_deg",
+            "sigma_scale",
+            "gap_sigma_xy_m",
+            "gap_sigma_yaw_deg",
+        ):
+            checks.positive(name, getattr(self, name))
+        checks.non_negative("velocity_lag_fraction", self.velocity_lag_fraction)
+
 
 @dataclass(frozen=True)
 class KeyframeConfig:
@@ -158,6 +221,12 @@ class KeyframeConfig:
     max_rotation_deg: float = 10.0
     min_peak_quality: float = 12.0
     max_frames: int = 8
+
+    def __post_init__(self) -> None:
+        checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
+        checks.positive("max_rotation_deg", self.max_rotation_deg, allow_inf=True)
+        checks.non_negative("min_peak_quality", self.min_peak_quality)
+        checks.at_least("max_frames", self.max_frames, 1)
 
 
 @dataclass(frozen=True)
@@ -181,6 +250,10 @@ class DeskewConfig:
     iterations: int = 1
     mid_sweep: bool = True
     yaw_rate_extrapolation: float = 1.0
+
+    def __post_init__(self) -> None:
+        checks.at_least("iterations", self.iterations, 0)
+        checks.finite("yaw_rate_extrapolation", self.yaw_rate_extrapolation)
 
 
 def _coarse() -> LevelConfig:

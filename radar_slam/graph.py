@@ -33,7 +33,7 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from radar_slam.errors import ConfigError, GraphError
+from radar_slam.errors import GraphError
 from radar_slam.factors import (
     DEFAULT_LOOP_KERNEL_WIDTH,
     POSE_DIM,
@@ -48,7 +48,7 @@ from radar_slam.factors import (
     relative_pose_covariance,
 )
 from radar_slam.loops.records import LoopConstraint
-from raplace import se2
+from raplace import checks, se2
 
 log = logging.getLogger(__name__)
 
@@ -117,40 +117,20 @@ class GraphConfig:
     gnc_inlier_probability: float = DEFAULT_GNC_INLIER_PROBABILITY
 
     def __post_init__(self) -> None:
-        if len(self.prior_sigmas) != POSE_DIM or not all(
-            np.isfinite(s) and s > 0 for s in self.prior_sigmas
-        ):
-            raise ConfigError(
-                f"graph.prior_sigmas: need 3 positive numbers, got {self.prior_sigmas}"
-            )
-        if self.loop_kernel not in ("cauchy", "huber", "none"):
-            raise ConfigError(f"graph.loop_kernel: {self.loop_kernel!r} is not cauchy|huber|none")
-        if self.final_pass not in ("lm", "gnc", "none"):
-            raise ConfigError(f"graph.final_pass: {self.final_pass!r} is not lm|gnc|none")
-        if self.gnc_loss not in ("tls", "gm"):
-            raise ConfigError(f"graph.gnc_loss: {self.gnc_loss!r} is not tls|gm")
-        if not (
-            np.isfinite(self.isam2_relinearize_threshold) and self.isam2_relinearize_threshold >= 0
-        ):
-            raise ConfigError(
-                "graph.isam2_relinearize_threshold: must be >= 0, "
-                f"got {self.isam2_relinearize_threshold}"
-            )
-        positive = {
-            "loop_kernel_width": self.loop_kernel_width,
-            "isam2_relinearize_skip": self.isam2_relinearize_skip,
-            "isam2_iterations": self.isam2_iterations,
-            "lm_max_iterations": self.lm_max_iterations,
-            "lm_relative_error_tol": self.lm_relative_error_tol,
-        }
-        for name, value in positive.items():
-            if not (np.isfinite(value) and value > 0):
-                raise ConfigError(f"graph.{name}: must be positive, got {getattr(self, name)}")
-        if not 0.0 < self.gnc_inlier_probability < 1.0:
-            raise ConfigError(
-                "graph.gnc_inlier_probability: must be in (0, 1), "
-                f"got {self.gnc_inlier_probability}"
-            )
+        if len(self.prior_sigmas) != POSE_DIM:
+            raise ValueError(f"prior_sigmas: need 3 positive numbers, got {self.prior_sigmas}")
+        for sigma in self.prior_sigmas:
+            checks.positive("prior_sigmas", sigma)
+        checks.one_of("loop_kernel", self.loop_kernel, ("cauchy", "huber", "none"))
+        checks.one_of("final_pass", self.final_pass, ("lm", "gnc", "none"))
+        checks.one_of("gnc_loss", self.gnc_loss, ("tls", "gm"))
+        checks.non_negative("isam2_relinearize_threshold", self.isam2_relinearize_threshold)
+        checks.positive("loop_kernel_width", self.loop_kernel_width)
+        checks.at_least("isam2_relinearize_skip", self.isam2_relinearize_skip, 1)
+        checks.at_least("isam2_iterations", self.isam2_iterations, 1)
+        checks.at_least("lm_max_iterations", self.lm_max_iterations, 1)
+        checks.positive("lm_relative_error_tol", self.lm_relative_error_tol)
+        checks.in_range("gnc_inlier_probability", self.gnc_inlier_probability, 0.0, 1.0, True, True)
 
 
 @dataclass(frozen=True)

@@ -32,9 +32,11 @@ def merge(
 ) -> T:
     """Return `base` with `overrides` applied, recursively for nested dataclasses.
 
-    Raises ConfigReadError for keys that `cls` does not have or values of the wrong type; the
-    message names the source `where` (a file path) and the key path, e.g.
-    "my.yaml: odometry.keyframe: unknown key 'max_distanc'".
+    Raises ConfigReadError for keys that `cls` does not have, values of the wrong type, or
+    values out of range (the ValueError of a dataclass's `__post_init__` checks, see
+    `raplace.checks`); the message names the source `where` (a file path) and the key path, e.g.
+    "my.yaml: odometry.keyframe: unknown key 'max_distanc'" or
+    "my.yaml: odometry.keyframe.max_translation_m: must be a positive number, got -1.0".
     """
     if not isinstance(overrides, dict):
         raise ConfigReadError(
@@ -53,7 +55,12 @@ def merge(
             changes[key] = merge(hint, current, value, where, (*keys, key))  # type: ignore[arg-type]
         else:
             changes[key] = _coerce(value, hint, _at(where, (*keys, key)))
-    return dataclasses.replace(base, **changes)  # type: ignore[type-var]
+    try:
+        return dataclasses.replace(base, **changes)  # type: ignore[type-var]
+    except ConfigReadError:
+        raise
+    except ValueError as exc:  # a range check of the dataclass's __post_init__: "field: ..."
+        raise ConfigReadError(f"{_at(where, keys)}{'.' if keys else ': '}{exc}") from None
 
 
 def _at(where: str, keys: tuple[str, ...]) -> str:

@@ -104,3 +104,10 @@ def tiny_loop_runs(
     assert main([*folder_run, *viewer]) == 0
     assert main(["run", str(bag), "--out", str(tmp / "bag")]) == 0
     return tmp
+
+
+@pytest.fixture()
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty current folder (a default results/ folder would be written here)."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path

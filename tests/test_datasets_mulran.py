@@ -189,15 +189,15 @@ def test_scans_outside_gt_are_nan_with_warning(
     tmp_path: Path, mulran_raw_dir: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     seq_dir = make_sequence(tmp_path, mulran_raw_dir, gt=False)
-    times = gt_times()[
-        :3
-    ]  # GT ends at scan 0 + 0.063 s: scan 2 (0.437 s later) clamps, scan 3 (0.687 s) is NaN
+    # GT rows every 0.1 s end at scan 0 + 0.063 s: scan 1 (0.187 s past the end, more than one
+    # GT period) and later have no GT; nothing is stretched to them (issue 12).
+    times = gt_times()[:3]
     write_global_pose(seq_dir / "global_pose.csv", times, base_pose_at(np.array(times)))
     with caplog.at_level(logging.WARNING):
         gt = MulRanSequence(seq_dir).ground_truth
     assert gt is not None
-    assert np.isfinite(gt[:3]).all() and np.isnan(gt[3]).all()
-    assert "1 of 4 scans" in caplog.text and "global_pose.csv" in caplog.text
+    assert np.isfinite(gt[0]).all() and np.isnan(gt[1:]).all()
+    assert "3 of 4 scans" in caplog.text and "global_pose.csv" in caplog.text
 
 
 def test_no_gt_and_lazy_frames(tmp_path: Path, mulran_raw_dir: Path) -> None:

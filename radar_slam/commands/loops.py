@@ -17,6 +17,7 @@ from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
 from radar_slam.errors import ResultsError
 from radar_slam.g2o import read_g2o, write_pose_graph
 from radar_slam.pipeline import close_loops_on_graph, open_configured
+from radar_slam.results import check_output_file
 
 
 def loops_command(
@@ -38,8 +39,7 @@ def loops_command(
     data_root: Path | None = DATA_ROOT_OPTION,
 ) -> None:
     """Add verified radar loop closures to a pose graph from another odometry and optimise it."""
-    if out.exists() and not force:
-        raise ResultsError(f"{out}: file exists; pass --force to overwrite it")
+    check_output_file(out, "--out", force)
     if out.resolve() == graph.resolve():
         raise ResultsError(f"{out}: would overwrite the input graph; choose another --out")
     record = read_g2o(graph)

@@ -21,8 +21,12 @@ DATA_ROOT_OPTION = typer.Option(
 
 @contextmanager
 def progress_bar(total: int, description: str, loops: bool = True) -> Iterator[ProgressCallback]:
-    """A tqdm bar (frames/s, and loops accepted/rejected) driven by pipeline `Progress` reports."""
-    with tqdm(total=total, desc=description, unit="frame", dynamic_ncols=True) as bar:
+    """A tqdm bar (frames/s, and loops accepted/rejected) driven by pipeline `Progress` reports.
+
+    Shown only when stderr is a terminal (a log file gets no bar), and erased on an error so
+    that the error is the one line left.
+    """
+    with tqdm(total=total, desc=description, unit="frame", dynamic_ncols=True, disable=None) as bar:
 
         def update(progress: Progress) -> None:
             bar.update(progress.done - bar.n)
@@ -31,4 +35,8 @@ def progress_bar(total: int, description: str, loops: bool = True) -> Iterator[P
                     loops=progress.loops_accepted, rejected=progress.loops_rejected, refresh=False
                 )
 
-        yield update
+        try:
+            yield update
+        except BaseException:
+            bar.leave = False
+            raise

@@ -19,7 +19,6 @@ from radar_slam.commands.bag_options import (
     reopen_with_bag_options,
 )
 from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
-from radar_slam.errors import ResultsError
 from radar_slam.outputs import (
     odometry_summary,
     slam_summary,
@@ -33,8 +32,8 @@ from radar_slam.pipeline import (
     open_configured,
     run_odometry,
 )
-from radar_slam.results import result_dir
-from radar_slam.viewer import RerunViewer, import_rerun  # issue-14
+from radar_slam.results import check_output_root, check_result_location, write_result_dir
+from radar_slam.viewer import RerunViewer, import_rerun
 
 SEQUENCE_ARGUMENT = typer.Argument(
     ...,
@@ -65,12 +64,6 @@ MAX_FRAMES_OPTION = typer.Option(
 )
 
 
-def check_out(out: Path | None) -> None:
-    """Fail before any work when `--out` exists and is not an empty folder."""
-    if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise ResultsError(f"{out}: output folder exists and is not empty; choose another --out")
-
-
 def without_loops(config: PipelineConfig) -> PipelineConfig:
     """`config` with loop closing disabled (recorded as such in config.yaml)."""
     loop_closure = dataclasses.replace(config.loop_closure, enabled=False)
@@ -92,13 +85,14 @@ def run_command(
     viewer: str | None = VIEWER_OPTION,
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
-    check_out(out)
-    if viewer is not None:  # issue-14: fail before any work when rerun-sdk is missing
+    check_output_root(out)
+    if viewer is not None:  # fail before any work when rerun-sdk is missing
         import_rerun()
     seq, settings = open_configured(sequence, data_root, config)
     seq, settings = reopen_with_bag_options(
         sequence, data_root, seq, settings, topic, gt_topic, layout
     )
+    check_result_location(seq.family, seq.name, out)  # before the run, not after it
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
@@ -107,8 +101,7 @@ def run_command(
         results = Pipeline(
             seq, settings, max_frames=max_frames, progress=update, observer=observer
         ).run()
-    folder = result_dir(seq.family, seq.name, out)
-    write_results(folder, results)
+    folder = write_result_dir(seq.family, seq.name, lambda f: write_results(f, results), out)
     typer.echo(slam_summary(results), nl=False)
     typer.echo(f"results in {folder}")
 
@@ -125,16 +118,16 @@ def odometry_command(
 ) -> None:
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
-    check_out(out)
+    check_output_root(out)
     seq, settings = open_configured(sequence, data_root, config)
     seq, settings = reopen_with_bag_options(
         sequence, data_root, seq, settings, topic, gt_topic, layout
     )
+    check_result_location(seq.family, seq.name, out)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}", loops=False) as update:
         run = run_odometry(seq, settings, max_frames=max_frames, progress=update)
-    folder = result_dir(seq.family, seq.name, out)
-    write_odometry_results(folder, run)
+    folder = write_result_dir(seq.family, seq.name, lambda f: write_odometry_results(f, run), out)
     typer.echo(odometry_summary(run), nl=False)
     typer.echo(f"results in {folder}")
 

@@ -6,6 +6,7 @@ the CLI shows one line instead of a numpy or OpenCV traceback. Nothing here writ
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -21,6 +22,8 @@ from radar_slam.datasets.navtech import (
     encoder_to_azimuth_ccw,
 )
 from radar_slam.errors import DatasetFormatError
+
+logger = logging.getLogger(__name__)
 
 PNG_SUFFIX = ".png"
 
@@ -91,6 +94,11 @@ def parse_navtech_header(image: NDArray[np.uint8], path: Path) -> NavtechHeader:
         raise DatasetFormatError(
             f"{path}: row {bad} has encoder count {encoders[bad]} (must be < "
             f"{ENCODER_TICKS_PER_REV}); not an Oxford-form radar scan?"
+        )
+    if np.all(times == times[0]) or np.all(encoders == encoders[0]):
+        raise DatasetFormatError(
+            f"{path}: every azimuth row has the same header (time {times[0]}, encoder "
+            f"{encoders[0]}); the 11-byte Navtech headers are zeroed or missing"
         )
     if np.any(np.diff(times) < 0):
         bad = int(np.argmax(np.diff(times) < 0)) + 1
@@ -181,16 +189,27 @@ def list_stamped_files(
     """Files `<integer stamp><suffix>` in `folder`, sorted by stamp.
 
     Returns:
-        (stamps (N,) int64, paths) in increasing stamp order. Other files are ignored.
+        (stamps (N,) int64, paths) in increasing stamp order. Other files are ignored and
+        counted in one logged warning.
 
     Raises:
         DatasetFormatError: two files with the same stamp (e.g. `0123.png` and `123.png`).
     """
-    entries = [
-        (int(path.stem), path)
-        for path in folder.iterdir()
-        if path.suffix.lower() == suffix and path.stem.isdigit() and path.is_file()
-    ]
+    entries = []
+    ignored = []
+    for path in folder.iterdir():
+        if path.suffix.lower() == suffix and path.stem.isdigit() and path.is_file():
+            entries.append((int(path.stem), path))
+        elif not path.name.startswith("."):
+            ignored.append(path.name)
+    if ignored:
+        logger.warning(
+            "%s: ignored %d file(s) not named <integer time>%s (first: %s)",
+            folder,
+            len(ignored),
+            suffix,
+            sorted(ignored)[0],
+        )
     entries.sort(key=lambda entry: entry[0])
     stamps = np.array([stamp for stamp, _ in entries], dtype=np.int64)
     duplicated = np.flatnonzero(np.diff(stamps) == 0)
@@ -220,6 +239,16 @@ def check_strictly_increasing(stamps: NDArray[np.int64], path: Path, what: str) 
         )
 
 
+def _is_numeric_row(line: str, delimiter: str | None) -> bool:
+    """True when every field of `line` parses as a number (a data row, not a header)."""
+    try:
+        for field in line.split(delimiter):
+            float(field)
+    except ValueError:
+        return False
+    return True
+
+
 def read_numeric_table(
     path: Path,
     n_columns: int,
@@ -236,7 +265,9 @@ def read_numeric_table(
         path: the text file.
         n_columns: required number of columns on every row.
         int_columns: indices of the columns to return as int64.
-        header_rows: leading lines to skip.
+        header_rows: at most this many leading lines are a header, recognised by content: a
+            leading line is skipped only when it is not all numbers (a file saved without its
+            header loses no data row).
         delimiter: column separator; None splits on whitespace.
 
     Returns:
@@ -252,7 +283,11 @@ def read_numeric_table(
         text = path.read_text(encoding="ascii")
     except (OSError, UnicodeDecodeError) as exc:
         raise DatasetFormatError(f"{path}: cannot read as text ({exc})") from exc
-    lines = [line for line in text.splitlines()[header_rows:] if line.strip()]
+    lines = [line for line in text.splitlines() if line.strip()]
+    skip = 0
+    while skip < min(header_rows, len(lines)) and not _is_numeric_row(lines[skip], delimiter):
+        skip += 1
+    lines = lines[skip:]
     if not lines:
         raise DatasetFormatError(f"{path}: no data rows")
     counts = np.array([len(line.split(delimiter)) for line in lines])

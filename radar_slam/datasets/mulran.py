@@ -18,9 +18,10 @@ period is the gap to the previous radar stamp, or 250 ms when that gap is implau
 
 Ground truth: `global_pose.csv` holds the vehicle BASE pose in MulRan's UTM-like world frame. It
 is interpolated to each scan time (x, y linearly; yaw linearly after unwrapping) and the radar
-mounting `MULRAN_T_BASE_RADAR` is applied: T_world_radar = T_world_base * T_base_radar. Scans
-up to 0.5 s outside the GT time span take the nearest end pose; scans further out get NaN poses
-and a logged warning.
+mounting `MULRAN_T_BASE_RADAR` is applied: T_world_radar = T_world_base * T_base_radar. A scan
+at most one GT sample period (the median gap of global_pose.csv) outside the GT time span takes
+the nearest end pose; scans further out have no ground truth (NaN poses, one logged warning):
+ground truth is never stretched over a part of the drive it does not cover.
 """
 
 from __future__ import annotations
@@ -83,7 +84,7 @@ NOMINAL_SCAN_PERIOD_NS = int(round(NS_PER_S / SCAN_RATE_HZ))
 SCAN_PERIOD_TOLERANCE = 0.2
 """A gap between radar stamps counts as one scan period if within +-20 % of the nominal one."""
 GT_CLAMP_NS = 500_000_000
-"""Scans at most this far outside the GT time span take the end pose; further out get NaN."""
+"""Upper bound of the tolerance outside the GT time span (one GT sample period, at most this)."""
 
 MULRAN_LAYOUT = (
     "<root>/mulran/<SEQ>/sensor_data/radar/polar/<t_ns>.png (also <SEQ>/radar/polar/, "
@@ -175,7 +176,7 @@ def read_global_pose(path: Path) -> tuple[NDArray[np.int64], NDArray[np.float64]
         DatasetFormatError: wrong column count, non-numeric or NaN entries, unsorted or
             duplicated times.
     """
-    ints, values = read_numeric_table(path, GLOBAL_POSE_COLUMNS, int_columns=(0,))
+    ints, values = read_numeric_table(path, GLOBAL_POSE_COLUMNS, int_columns=(0,), header_rows=1)
     times = ints[:, 0]
     check_strictly_increasing(times, path, "timestamp")
     yaw = np.arctan2(values[:, GP_COL_R10], values[:, GP_COL_R00])
@@ -187,7 +188,7 @@ def interpolate_poses(
     times_ns: NDArray[np.int64],
     poses: NDArray[np.float64],
     query_ns: NDArray[np.int64],
-    clamp_ns: int = GT_CLAMP_NS,
+    clamp_ns: int | None = None,
 ) -> NDArray[np.float64]:
     """Interpolate SE(2) poses to query times.
 
@@ -199,11 +200,14 @@ def interpolate_poses(
         times_ns: (N,) strictly increasing pose times [ns].
         poses: (N, 3) poses (x, y, yaw).
         query_ns: (M,) times to interpolate at [ns].
-        clamp_ns: how far outside the span a query may still be clamped [ns].
+        clamp_ns: how far outside the span a query may still be clamped [ns]; default one
+            sample period (the median gap of `times_ns`), at most `GT_CLAMP_NS`.
 
     Returns:
         (M, 3) interpolated poses, yaw wrapped to [-pi, pi).
     """
+    if clamp_ns is None:
+        clamp_ns = gt_tolerance_ns(times_ns)
     origin = times_ns[0]
     t = (times_ns - origin).astype(np.float64)
     q = (query_ns - origin).astype(np.float64)
@@ -218,26 +222,35 @@ def interpolate_poses(
     return result
 
 
+def gt_tolerance_ns(times_ns: NDArray[np.int64]) -> int:
+    """How far outside the GT time span a scan still takes the end pose: one GT sample period
+    (the median gap), at most `GT_CLAMP_NS` [ns]."""
+    if len(times_ns) < 2:
+        return 0
+    return int(min(GT_CLAMP_NS, np.median(np.diff(times_ns))))
+
+
 def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
     """T_world_radar (N, 3) at each scan time, from `global_pose.csv` (NaN rows outside GT)."""
     times, base_poses = read_global_pose(gt_path)
-    base_at_scans = interpolate_poses(times, base_poses, scan_stamps_ns)
+    tolerance_ns = gt_tolerance_ns(times)
+    base_at_scans = interpolate_poses(times, base_poses, scan_stamps_ns, tolerance_ns)
     missing = int(np.isnan(base_at_scans[:, 0]).sum())
     if missing:
         logger.warning(
-            "%s: %d of %d scans lie more than %.1f s outside its time span; their ground truth "
-            "is NaN",
+            "%s: %d of %d scans lie more than %.3f s (one GT period) outside its time span; "
+            "they have no ground truth",
             gt_path,
             missing,
             len(scan_stamps_ns),
-            GT_CLAMP_NS / NS_PER_S,
+            tolerance_ns / NS_PER_S,
         )
     return se2.compose(base_at_scans, MULRAN_T_BASE_RADAR)
 
 
 def _read_stamp_list(path: Path) -> NDArray[np.int64]:
     """Read navtech_top_stamp.csv: one t_ns per line, strictly increasing."""
-    ints, _ = read_numeric_table(path, 1, int_columns=(0,))
+    ints, _ = read_numeric_table(path, 1, int_columns=(0,), header_rows=1)
     stamps = ints[:, 0]
     check_strictly_increasing(stamps, path, "timestamp")
     return stamps
@@ -353,8 +366,8 @@ class MulRanSequence:
     def ground_truth(self) -> NDArray[np.float64] | None:
         """(N, 3) T_world_radar (x, y, yaw) at each scan time, MulRan world frame; None without GT.
 
-        Read and interpolated on first access. Rows are NaN for scans more than 0.5 s outside
-        the GT time span.
+        Read and interpolated on first access. Rows are NaN for scans more than one GT sample
+        period outside the GT time span.
         """
         if self.gt_path is None:
             return None

@@ -29,9 +29,9 @@ def _split_family_spec(spec: str) -> tuple[Family, str] | None:
 
 
 def _layouts_and_sources(selected: list[Family]) -> str:
-    """Expected layout and download address of each family, for error messages."""
-    return "\n".join(
-        f"  {family.name}: expected {family.layout}\n    obtain it from {family.obtain}"
+    """Expected layout and download address of each family, on one line (error messages)."""
+    return "; ".join(
+        f"{family.name}: expected {family.layout}, obtained from {family.obtain}"
         for family in selected
     )
 
@@ -93,7 +93,7 @@ def open_sequence(
         if detected is not None:
             return _open_with(detected, path, loader_options)
         raise DatasetNotFoundError(
-            f"{path} exists but matches no known dataset layout; expected one of:\n"
+            f"{path} exists but matches no known dataset layout; expected one of: "
             f"{_layouts_and_sources(candidates)}"
         )
     looked_in.append(path.absolute())
@@ -105,10 +105,9 @@ def open_sequence(
             if folder.is_dir() and family.detect(folder):
                 return _open_with(family, folder, loader_options)
             looked_in.append(folder.absolute())
-    places = "\n".join(f"  {place}" for place in dict.fromkeys(looked_in))
+    places = ", ".join(str(place) for place in dict.fromkeys(looked_in))
     known = ", ".join(sorted(families())) or "none registered"
-    raise DatasetNotFoundError(
-        f"sequence {str(spec)!r} not found (data root {root}; families: {known}). Looked in:\n"
-        f"{places}\nExpected layout and where to get the data:\n"
-        f"{_layouts_and_sources(candidates)}"
+    raise DatasetNotFoundError(  # one line (issue 12), however long
+        f"sequence {str(spec)!r} not found (data root {root}; families: {known}); looked in "
+        f"{places}; {_layouts_and_sources(candidates)}"
     )

@@ -88,7 +88,9 @@ def is_oxford_sequence(folder: Path) -> bool:
 
 def read_radar_timestamps(path: Path) -> NDArray[np.int64]:
     """Read `radar.timestamps` ("<t_us> <flag>" lines): (N,) int64 scan times [us], increasing."""
-    ints, _ = read_numeric_table(path, TIMESTAMPS_COLUMNS, int_columns=(0,), delimiter=None)
+    ints, _ = read_numeric_table(
+        path, TIMESTAMPS_COLUMNS, int_columns=(0,), header_rows=1, delimiter=None
+    )
     stamps = ints[:, 0]
     check_strictly_increasing(stamps, path, "timestamp")
     return stamps
@@ -214,6 +216,18 @@ class OxfordSequence:
                 raise DatasetFormatError(
                     f"{timestamps_path}: {len(missing)} of {len(paths)} listed scans are missing "
                     f"from {radar} (first: {missing[0]})"
+                )
+            listed = {path.name for path in paths}
+            unlisted = sorted(
+                p.name for p in radar.iterdir() if p.suffix == ".png" and p.name not in listed
+            )
+            if unlisted:
+                logger.warning(
+                    "%s: ignored %d scan(s) of %s not listed in it (first: %s)",
+                    timestamps_path,
+                    len(unlisted),
+                    radar,
+                    unlisted[0],
                 )
         else:
             logger.info("%s absent: taking the scan list from %s", timestamps_path, radar)

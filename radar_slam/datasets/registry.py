@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from radar_slam.datasets.frame import RadarSequence
+from raplace import checks
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +48,10 @@ class DatasetConfig:
     layout: str | None = None
     rows: Literal["azimuths", "bins"] | None = None
     azimuth_direction: Literal["cw", "ccw"] | None = None
+
+    def __post_init__(self) -> None:
+        if self.range_resolution_m is not None:
+            checks.positive("range_resolution_m", self.range_resolution_m)
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""

@@ -6,6 +6,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from odometry import OdometryConfig
+from raplace import checks
 from raplace.config import RaPlaceConfig
 
 CHI2_3DOF_99 = 11.345
@@ -36,6 +37,14 @@ class VerificationConfig:
     max_disagreement_m: float = 1.5
     max_disagreement_deg: float = 3.0
 
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.finite("min_sinogram_quality", self.min_sinogram_quality)
+        checks.in_range("min_inlier_fraction", self.min_inlier_fraction, 0.0, 1.0)
+        checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
+        checks.non_negative("min_refined_quality", self.min_refined_quality)
+        checks.positive("max_disagreement_m", self.max_disagreement_m, allow_inf=True)
+        checks.positive("max_disagreement_deg", self.max_disagreement_deg, allow_inf=True)
+
 
 @dataclass(frozen=True)
 class LoopCovarianceConfig:
@@ -57,6 +66,12 @@ class LoopCovarianceConfig:
     disagreement_weight: float = 0.2
     min_sigma_xy_m: float = 0.05
     min_sigma_yaw_deg: float = 0.1
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.positive("sigma_scale", self.sigma_scale)
+        checks.non_negative("disagreement_weight", self.disagreement_weight)
+        checks.positive("min_sigma_xy_m", self.min_sigma_xy_m)
+        checks.positive("min_sigma_yaw_deg", self.min_sigma_yaw_deg)
 
 
 @dataclass(frozen=True)
@@ -88,6 +103,15 @@ class ConsistencyConfig:
     drift_deg_per_m: float = 0.05
     min_sigma_xy_m: float = 0.1
     min_sigma_yaw_deg: float = 0.2
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.at_least("min_support", self.min_support, 0)
+        checks.positive("window_m", self.window_m)
+        checks.positive("chi2_threshold", self.chi2_threshold)
+        checks.non_negative("drift_fraction", self.drift_fraction)
+        checks.non_negative("drift_deg_per_m", self.drift_deg_per_m)
+        checks.positive("min_sigma_xy_m", self.min_sigma_xy_m)
+        checks.positive("min_sigma_yaw_deg", self.min_sigma_yaw_deg)
 
 
 LOOP_POSE_N_THETA = 120
@@ -136,3 +160,9 @@ class LoopClosureConfig:
     verification: VerificationConfig = field(default_factory=VerificationConfig)
     covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.at_least("candidates", self.candidates, 1)
+        checks.at_least("loops_per_query", self.loops_per_query, 1)
+        checks.positive("max_descriptor_distance", self.max_descriptor_distance)
+        checks.non_negative("query_spacing_m", self.query_spacing_m)

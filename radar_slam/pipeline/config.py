@@ -61,11 +61,14 @@ def open_configured(
 
     The family, known only once the sequence is found, selects the shipped overrides; when the
     configuration's `dataset` section changes loader settings, the sequence is opened again
-    with them (opening is lazy: no scan is read).
+    with them (opening is lazy). The ground truth and the first scan are then read, so that a
+    malformed file fails before any work rather than after it.
     """
     load_config(None, path)  # a mistake in the user's file fails before any data is generated
     sequence = open_sequence(spec, data_root)
     config = load_config(sequence.family, path)
     if config.dataset.loader_options():
         sequence = open_sequence(spec, data_root, config.dataset)
+    _ = sequence.ground_truth  # a malformed GT file fails now, not after the run (issue 12)
+    _ = sequence[0]  # ... and so does a first scan of the wrong shape or format
     return sequence, config

@@ -51,6 +51,8 @@ class SlamMetrics:
     (`ate_origin_*_m`) [m]; drifts are KITTI-style mean translation errors over 100..800 m
     segments [%] and rotation errors [deg/100 m]; `ate_reduction` = 1 - ate_slam / ate_odometry.
     Fields needing ground truth are None without it (drift also below 100 m of path).
+    `scans_with_gt` is how many scans the accuracy figures were computed over, and
+    `scans_without_gt` how many had no ground truth (outside its time span).
     """
 
     frames: int
@@ -71,6 +73,8 @@ class SlamMetrics:
     drift_slam_pct: float | None
     drift_odometry_deg_per_100m: float | None
     drift_slam_deg_per_100m: float | None
+    scans_with_gt: int | None = None
+    scans_without_gt: int | None = None
 
     def to_dict(self) -> dict[str, float | int | None]:
         return asdict(self)
@@ -150,6 +154,8 @@ class OdometryRun:
         }
         if self.metrics is not None:
             data.update(self.metrics.to_dict())
+            data["scans_with_gt"] = self.metrics.poses_matched
+            data["scans_without_gt"] = frames - self.metrics.poses_matched
         return data
 
 

@@ -161,4 +161,6 @@ def summarise(
         drift_slam_pct=None if slam is None else slam.drift_trans_pct,
         drift_odometry_deg_per_100m=None if odometry is None else odometry.drift_rot_deg_per_100m,
         drift_slam_deg_per_100m=None if slam is None else slam.drift_rot_deg_per_100m,
+        scans_with_gt=None if odometry is None else odometry.poses_matched,
+        scans_without_gt=None if odometry is None else frames - odometry.poses_matched,
     )

@@ -5,7 +5,9 @@
 later uses reuse it. Generation goes to a temporary sibling folder that is renamed into place
 after its completion marker is written, so an interrupted run never leaves a folder that looks
 complete; a folder without the marker (or from another simulator version) is regenerated.
-The sequences are in the MulRan layout and are read by `MulRanSequence`.
+The sequences are in the MulRan layout and are read by `MulRanSequence`. A folder whose marker
+says it is incomplete (an interrupted `radar-slam simulate --out`) is refused; regenerating a
+folder deletes only the files the simulator writes and refuses if it holds any other.
 
 The dataset registry loads this module through the `radar_slam.datasets` entry point declared in
 pyproject.toml (datasets never import the simulator); importing it registers the family.
@@ -19,13 +21,20 @@ import shutil
 from pathlib import Path
 
 from radar_slam.datasets.frame import RadarSequence
-from radar_slam.datasets.mulran import MulRanSequence, is_mulran_sequence
+from radar_slam.datasets.mulran import MulRanSequence
 from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
 from radar_slam.datasets.registry import Family, family_folder, register
-from radar_slam.errors import DatasetNotFoundError, RadarSlamError
+from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from radar_slam.results import check_writable, pid_alive
 from radar_slam.sim.generate import SIM_VERSION, generate_sequence
 from radar_slam.sim.scenarios import SCENARIOS
-from radar_slam.sim.writer import COMPLETE_MARKER, WORLD_FILE, read_json
+from radar_slam.sim.writer import (
+    COMPLETE_MARKER,
+    WORLD_FILE,
+    read_json,
+    remove_simulated,
+    simulator_files,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -49,29 +58,22 @@ def is_complete(folder: Path, scenario: str | None = None) -> bool:
     marker = _marker(folder)
     if marker is None or marker.get("simulator_version") != SIM_VERSION:
         return False
+    if marker.get("complete", True) is not True:
+        return False
     return scenario is None or marker.get("scenario") == scenario
 
 
 def is_synthetic_sequence(folder: Path) -> bool:
-    """True for a folder written by the simulator (marker present) in the MulRan layout."""
-    return folder.is_dir() and _marker(folder) is not None and is_mulran_sequence(folder)
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+    """True for a folder written by the simulator (its marker or world.json present, complete
+    or not: `open_synthetic` refuses an incomplete one rather than another loader reading it)."""
+    return folder.is_dir() and any((folder / f).is_file() for f in (COMPLETE_MARKER, WORLD_FILE))
 
 
 def _remove_stale_partials(base: Path, name: str) -> None:
     """Delete temporary folders of `name` left by generations whose process has died."""
     for partial in base.glob(f".{name}{PARTIAL_SUFFIX}*"):
         pid_text = partial.name.rsplit(PARTIAL_SUFFIX, 1)[-1]
-        if not pid_text.isdigit() or not _pid_alive(int(pid_text)) or int(pid_text) == os.getpid():
+        if not pid_text.isdigit() or not pid_alive(int(pid_text)) or int(pid_text) == os.getpid():
             logger.info("removing interrupted generation %s", partial)
             shutil.rmtree(partial, ignore_errors=True)
 
@@ -90,7 +92,14 @@ def resolve_synthetic(root: Path, name: str) -> Path:
     folder = base / name
     if is_complete(folder, name):
         return folder
+    check_writable(folder, f"synthetic/{name} (generated on first use)")
     if folder.exists():
+        foreign = simulator_files(folder)[1] if folder.is_dir() else [folder]
+        if foreign:  # checked before any work; the user's files are never deleted
+            raise DatasetFormatError(
+                f"{folder}: is not a complete simulated sequence and holds files the simulator "
+                f"did not write (first: {foreign[0].name}); move them away to regenerate it"
+            )
         logger.warning(
             "%s is incomplete or from another simulator version: regenerating it", folder
         )
@@ -104,7 +113,9 @@ def resolve_synthetic(root: Path, name: str) -> Path:
             shutil.rmtree(partial)
             return folder
         if folder.exists():
-            shutil.rmtree(folder)
+            remove_simulated(folder)  # only the simulator's files; refuses if others appeared
+            if folder.exists():
+                folder.rmdir()
         partial.rename(folder)
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
@@ -119,10 +130,11 @@ def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Rad
     to study a mis-calibrated range resolution.
     """
     folder = Path(folder)
-    if _marker(folder) is None:
-        raise RadarSlamError(
-            f"{folder}: not a complete simulated sequence (no {SYNTHETIC_FAMILY} completion "
-            "marker); regenerate it"
+    marker = _marker(folder)
+    if marker is None or marker.get("complete", True) is not True:
+        raise DatasetFormatError(
+            f"{folder}: simulated sequence is incomplete (interrupted while being written); "
+            f"regenerate it: radar-slam simulate SCENARIO --out {folder} --force"
         )
     world = read_json(folder / WORLD_FILE) or {}
     sensor = world.get("sensor", {})
@@ -132,7 +144,14 @@ def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Rad
         resolution_m = float(sensor["range_resolution_m"])
     if range_resolution_m is not None:
         resolution_m = range_resolution_m
-    return MulRanSequence(folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY)
+    sequence = MulRanSequence(folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY)
+    frames = marker.get("frames")
+    if isinstance(frames, int) and len(sequence) != frames:
+        raise DatasetFormatError(
+            f"{folder}: {len(sequence)} scans found, the simulator wrote {frames}; "
+            f"regenerate it: radar-slam simulate SCENARIO --out {folder} --force"
+        )
+    return sequence
 
 
 SYNTHETIC = register(

@@ -142,6 +142,21 @@ class GeneratedSequence:
     build_seconds: float
 
 
+def checked_frame_count(scene: Scene, frames: int | None) -> int:
+    """`frames`, or the whole route when None.
+
+    Raises:
+        RadarSlamError: more frames requested than the route provides, or fewer than 1.
+    """
+    n_frames = scene.n_frames if frames is None else int(frames)
+    if not 0 < n_frames <= scene.n_frames:
+        raise RadarSlamError(
+            f"scenario {scene.scenario.name!r} provides 1 to {scene.n_frames} frames, "
+            f"{n_frames} requested"
+        )
+    return n_frames
+
+
 def write_scans(
     scene: Scene,
     folder: Path,
@@ -213,10 +228,12 @@ def generate_sequence(
     frames: int | None = None,
     workers: int = 1,
     on_frame: Callable[[int, int], None] | None = None,
+    scene: Scene | None = None,
 ) -> GeneratedSequence:
     """Generate `scenario` into `folder` (created; files in it are overwritten).
 
-    The completion marker is written last, so a folder without it is a half-written sequence.
+    The completion marker is written first saying "complete": false and rewritten last saying
+    true, so a half-written sequence says so.
 
     Args:
         scenario: what to simulate.
@@ -225,21 +242,24 @@ def generate_sequence(
         frames: number of scans (default: the whole route, or the scenario's cap).
         workers: background PNG writer threads (0: write inline).
         on_frame: called with (frames done, total) after each scan.
+        scene: the scene of `scenario` and `seed` when already built (`build_scene`).
 
     Raises:
         RadarSlamError: more frames requested than the route provides.
     """
     started = time.perf_counter()
-    scene = build_scene(scenario, seed)
+    scene = build_scene(scenario, seed) if scene is None else scene
     build_seconds = time.perf_counter() - started
-    n_frames = scene.n_frames if frames is None else int(frames)
-    if not 0 < n_frames <= scene.n_frames:
-        raise RadarSlamError(
-            f"scenario {scenario.name!r} provides 1 to {scene.n_frames} frames, "
-            f"{n_frames} requested"
-        )
+    n_frames = checked_frame_count(scene, frames)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    marker = {
+        "simulator_version": SIM_VERSION,
+        "scenario": scenario.name,
+        "seed": scene.seed,
+        "frames": n_frames,
+    }
+    write_json(folder / COMPLETE_MARKER, {**marker, "complete": False})  # until the end
     logger.info(
         "generating %s (seed %d): %d scans into %s", scenario.name, scene.seed, n_frames, folder
     )
@@ -256,15 +276,7 @@ def generate_sequence(
         build_seconds=build_seconds,
     )
     write_json(folder / WORLD_FILE, world_description(scene, summary))
-    write_json(
-        folder / COMPLETE_MARKER,
-        {
-            "simulator_version": SIM_VERSION,
-            "scenario": scenario.name,
-            "seed": scene.seed,
-            "frames": n_frames,
-        },
-    )
+    write_json(folder / COMPLETE_MARKER, {**marker, "complete": True})
     logger.info(
         "%s: %d scans, %.0f m in %.1f s", folder, n_frames, summary.length_m, summary.seconds
     )

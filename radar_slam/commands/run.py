@@ -16,6 +16,7 @@ import typer
 from tqdm import tqdm
 
 from radar_slam.commands.data import DATA_ROOT_OPTION
+from radar_slam.datasets.stride import strided
 from radar_slam.errors import ResultsError
 from radar_slam.outputs import (
     odometry_summary,
@@ -53,6 +54,9 @@ CONFIG_OPTION = typer.Option(
 MAX_FRAMES_OPTION = typer.Option(
     None, "--max-frames", min=1, help="Process only the first N scans."
 )
+STRIDE_OPTION = typer.Option(  # issue 10: strided view of the sequence
+    1, "--stride", min=1, help="Use every K-th scan (4 Hz data at --stride 4 is 1 Hz)."
+)
 
 
 @contextmanager
@@ -87,6 +91,7 @@ def run_command(
     out: Path | None = OUT_OPTION,
     config: Path | None = CONFIG_OPTION,
     max_frames: int | None = MAX_FRAMES_OPTION,
+    stride: int = STRIDE_OPTION,
     no_loops: bool = typer.Option(
         False, "--no-loops", help="Odometry and pose graph only, no loop closing."
     ),
@@ -95,6 +100,7 @@ def run_command(
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
     check_out(out)
     seq, settings = open_configured(sequence, data_root, config)
+    seq = strided(seq, stride)
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
@@ -111,12 +117,14 @@ def odometry_command(
     out: Path | None = OUT_OPTION,
     config: Path | None = CONFIG_OPTION,
     max_frames: int | None = MAX_FRAMES_OPTION,
+    stride: int = STRIDE_OPTION,
     data_root: Path | None = DATA_ROOT_OPTION,
 ) -> None:
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
     check_out(out)
     seq, settings = open_configured(sequence, data_root, config)
+    seq = strided(seq, stride)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}", loops=False) as update:
         run = run_odometry(seq, settings, max_frames=max_frames, progress=update)

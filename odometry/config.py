@@ -180,7 +180,10 @@ class DeskewConfig:
             between the scans' reference times follows with the velocity.
         yaw_rate_extrapolation: in `Odometry`, the yaw rate wanted at a time (to de-skew a scan,
             or to move a pose from mid-sweep to the reference time) is the last measured one
-            plus this fraction of its trend extrapolated to that time (0: constant velocity).
+            plus this fraction of its trend extrapolated to that time (0: constant velocity);
+            the extrapolated change is bounded by the last measured change and never turns the
+            yaw rate to the other side. It never enters the prediction a registration is
+            compared with.
     """
 
     enabled: bool = True

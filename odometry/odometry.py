@@ -11,8 +11,10 @@ image symmetrically instead of displacing it; registrations chain the image pose
 at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
 measured between the last two image poses; that move's error does not accumulate, and its
 covariance is added to the registration's. The velocity used for de-skewing follows the trend of
-the yaw rate (`DeskewConfig.yaw_rate_extrapolation`): in a turn the yaw rate changes by several
-degrees per second from one scan to the next, and a stale one bends the de-skewed image.
+the yaw rate (`DeskewConfig.yaw_rate_extrapolation`), bounded so that it never extrapolates more
+than the last measured change nor turns the yaw rate to the other side. When the velocity a scan
+was de-skewed with is far from the one its registration then measures (hard braking, a curvature
+step at a junction), the scan is re-rendered with the measured one and registered again.
 
 Each registration is global (rotation over the full circle, translation over the whole coarse
 image; `registration.register_images`); the constant-velocity prediction is a search hint, never
@@ -42,15 +44,12 @@ from odometry.preprocess import preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.se2 import between, compose, inverse, wrap_angle
+from odometry.velocity import Velocity, bounded_twist, close_twists
 
 logger = logging.getLogger(__name__)
 
 NS_PER_S = 1e9
 FloatArray = NDArray[np.float64]
-TWIST_REFRESH_MPS = 0.25
-"""A new keyframe is re-rendered when its de-skew velocity is off by more than this [m/s]."""
-TWIST_REFRESH_RADPS = np.deg2rad(2.0)
-"""... or its yaw rate by more than this [rad/s]."""
 
 
 @dataclass(frozen=True)
@@ -107,47 +106,12 @@ class _Keyframe:
     """Covariance (own axes) that moving the image pose to the reference time adds to `pose`."""
 
 
-@dataclass(frozen=True)
-class _Velocity:
-    """The running body velocity: the twist (vx, vy [m/s], yaw rate [rad/s]) measured between
-    two registered image poses, at the middle of that interval (`time_ns`), and the change of
-    its yaw rate since the measurement before (`yaw_rate_change` [rad/s] over `span_s` [s])."""
-
-    twist: FloatArray
-    time_ns: int
-    yaw_rate_change: float = 0.0
-    span_s: float = 0.0
-
-    def at(self, time_ns: int, trend_gain: float) -> FloatArray:
-        """The twist expected at `time_ns`: constant, plus `trend_gain` times the yaw-rate trend
-        extrapolated linearly, bounded: the extrapolated change is at most the last measured
-        change, and it never turns the yaw rate to the other side (leaving a turn, an
-        unbounded trend predicts the turn to swing the other way)."""
-        twist = self.twist.copy()
-        if trend_gain == 0.0 or self.span_s <= 0.0:
-            return twist
-        elapsed_s = (time_ns - self.time_ns) / NS_PER_S
-        limit = abs(self.yaw_rate_change)
-        delta = float(np.clip(self.yaw_rate_change / self.span_s * elapsed_s, -limit, limit))
-        yaw_rate = twist[2] + trend_gain * delta
-        twist[2] = yaw_rate if yaw_rate * twist[2] > 0.0 else 0.0
-        return twist
-
-    def updated(self, twist: FloatArray, time_ns: int) -> _Velocity:
-        """The velocity after measuring `twist` over an interval centred at `time_ns`."""
-        span_s = (time_ns - self.time_ns) / NS_PER_S
-        change = float(twist[2] - self.twist[2]) if span_s > 0 else 0.0
-        return _Velocity(
-            twist=twist, time_ns=time_ns, yaw_rate_change=change, span_s=max(span_s, 0.0)
-        )
-
-
 @dataclass
 class _State:
     keyframe: _Keyframe | None = None
     previous: _Keyframe | None = None  # the previous scan (same fields as a keyframe)
     last_registered: _Keyframe | None = None  # the last scan that was not a gap
-    velocity: _Velocity | None = None
+    velocity: Velocity | None = None
     results: list[OdometryResult] = field(default_factory=list)
 
 
@@ -264,7 +228,7 @@ class Odometry:
         velocity = self._state.velocity
         if velocity is None:
             return None
-        twist = _bounded(velocity.twist, self.config)
+        twist = bounded_twist(velocity.twist, self.config)
         return compose(
             previous.image_pose, motion_from_twist(twist, _image_interval_s(previous, scan, dt_s))
         )
@@ -346,12 +310,13 @@ class Odometry:
         assert previous is not None and keyframe is not None
         if state.velocity is None:
             self._place_first_images(reference, scan, estimate.motion)
-        image_pose = compose(reference.image_pose, estimate.motion)
         # A gap's pose is a guess: measure the velocity from a registered scan instead.
         base = reference if previous.gap and reference is not previous else previous
         interval_s = _image_interval_s(
             base, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
+        scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
+        image_pose = compose(reference.image_pose, estimate.motion)
         change = self._update_velocity(base, scan, image_pose, interval_s)
         pose = self._reference_pose(image_pose, scan)
         node = _Keyframe(
@@ -387,6 +352,30 @@ class Odometry:
             quality=estimate.quality,
         )
 
+    def _redeskewed(
+        self,
+        reference: _Keyframe,
+        base: _Keyframe,
+        scan: PreparedScan,
+        estimate: MotionEstimate,
+        interval_s: float,
+    ) -> tuple[PreparedScan, MotionEstimate]:
+        """`scan` and its estimate, re-rendered and re-registered when the velocity it was
+        de-skewed with is far from the one its registration measures since `base` (a step of
+        the velocity: hard braking, a curvature step at a junction; a stale velocity bends the
+        image). The re-registration is seeded with the first estimate."""
+        if scan.twist is None or self._state.velocity is None or interval_s <= 0:
+            return scan, estimate
+        image_pose = compose(reference.image_pose, estimate.motion)
+        measured = bounded_twist(
+            twist_from_motion(between(base.image_pose, image_pose), interval_s), self.config
+        )
+        if close_twists(measured, scan.twist):
+            return scan, estimate
+        again = PreparedScan(scan.polar, measured, self.config)
+        redone = register_images(reference.scan, again, self.config, hint=estimate.motion)
+        return (again, redone) if redone.ok else (scan, estimate)
+
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(
         self, reference: _Keyframe, scan: PreparedScan, image_motion: FloatArray
@@ -409,7 +398,7 @@ class Odometry:
     def _velocity_at(self, time_ns: int) -> FloatArray:
         """The running twist expected at `time_ns`, within the plausible speed and yaw rate."""
         assert self._state.velocity is not None
-        return _bounded(self._state.velocity.at(time_ns, self._trend_gain), self.config)
+        return bounded_twist(self._state.velocity.at(time_ns, self._trend_gain), self.config)
 
     def _update_velocity(
         self, base: _Keyframe, scan: PreparedScan, image_pose: FloatArray, interval_s: float
@@ -420,7 +409,7 @@ class Odometry:
         twist = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         centre_ns = (_image_time_ns(base.scan) + _image_time_ns(scan)) // 2
         if state.velocity is None:
-            state.velocity = _Velocity(twist=twist, time_ns=centre_ns)
+            state.velocity = Velocity(twist=twist, time_ns=centre_ns)
             return np.zeros(3)
         change = twist - state.velocity.twist
         state.velocity = state.velocity.updated(twist, centre_ns)
@@ -468,11 +457,7 @@ class Odometry:
         if velocity is None or not self.config.deskew.enabled or scan.polar.timing is None:
             return scan
         new = self._velocity_at(_image_time_ns(scan))
-        used = scan.twist
-        if used is not None and (
-            np.hypot(*(new[:2] - used[:2])) <= TWIST_REFRESH_MPS
-            and abs(new[2] - used[2]) <= TWIST_REFRESH_RADPS
-        ):
+        if scan.twist is not None and close_twists(new, scan.twist):
             return scan
         return PreparedScan(scan.polar, new, self.config)
 
@@ -551,18 +536,6 @@ class Odometry:
 def _image_interval_s(previous: _Keyframe, scan: PreparedScan, dt_s: float) -> float:
     """Time [s] from `previous`'s image time to `scan`'s, `dt_s` apart in reference time."""
     return dt_s + scan.image_time_s - previous.scan.image_time_s
-
-
-def _bounded(twist: FloatArray, cfg: OdometryConfig) -> FloatArray:
-    """`twist` (vx, vy [m/s], yaw rate [rad/s]) limited to the plausible speed and yaw rate."""
-    qcfg = cfg.quality
-    bounded = np.asarray(twist, dtype=np.float64).copy()
-    speed = float(np.hypot(bounded[0], bounded[1]))
-    if speed > qcfg.max_speed_mps:
-        bounded[:2] *= qcfg.max_speed_mps / speed
-    limit = np.deg2rad(qcfg.max_yaw_rate_dps)
-    bounded[2] = float(np.clip(bounded[2], -limit, limit))
-    return bounded
 
 
 def _ns(seconds: float) -> int:

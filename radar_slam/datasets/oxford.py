@@ -191,6 +191,7 @@ class OxfordSequence:
     Args:
         folder: the sequence folder (holding `radar/` and `radar.timestamps`).
         range_resolution_m: size of one range bin [m] (documentation 0.0438; SDK 0.0432).
+        azimuth_offset_rad: added to every azimuth [rad, CCW] (the `dataset:` config section).
 
     Raises:
         DatasetNotFoundError: `folder` or its `radar/` folder does not exist.
@@ -200,7 +201,12 @@ class OxfordSequence:
 
     family: str = OXFORD_FAMILY
 
-    def __init__(self, folder: Path, range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M,
+        azimuth_offset_rad: float = 0.0,
+    ) -> None:
         folder = Path(folder)
         radar = folder / RADAR_FOLDER
         if not radar.is_dir():
@@ -223,6 +229,7 @@ class OxfordSequence:
         self.name: str = folder.name
         self.folder = folder
         self.range_resolution_m = range_resolution_m
+        self.azimuth_offset_rad = float(azimuth_offset_rad)
         self._paths = paths
         self._scan_us = scan_us
         gt_path = folder / ODOMETRY_FILE
@@ -253,7 +260,7 @@ class OxfordSequence:
         return RadarFrame(
             timestamp_ns=int(self._times_ns[index]),
             polar=np.ascontiguousarray(image[:, OXFORD_HEADER_BYTES:]),
-            azimuths_rad=encoder_to_azimuth_ccw(header.encoders),
+            azimuths_rad=encoder_to_azimuth_ccw(header.encoders) + self.azimuth_offset_rad,
             range_resolution_m=self.range_resolution_m,
             sensor=OXFORD_SENSOR,
             azimuth_times_ns=header.times * NS_PER_US,

@@ -22,9 +22,13 @@ class DatasetConfig:
         range_resolution_m: size of one range bin [m]; None keeps the loader's own value (Oxford:
             0.0438 from the dataset documentation, while the official SDK hard-codes 0.0432;
             MulRan: 0.05952; synthetic: the simulated sensor's).
+        azimuth_offset_rad: added to every scan azimuth [rad, CCW]: an encoder zero that is
+            not the vehicle's forward axis (or the ground truth's). None is 0 (no correction);
+            see the README for what the Oxford samples show.
     """
 
     range_resolution_m: float | None = None
+    azimuth_offset_rad: float | None = None
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""

@@ -116,11 +116,14 @@ def resolve_synthetic(root: Path, name: str) -> Path:
     return folder
 
 
-def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Sequence:
+def open_synthetic(
+    folder: Path, range_resolution_m: float | None = None, azimuth_offset_rad: float = 0.0
+) -> Sequence:
     """Open a simulated sequence with the MulRan loader (bin count and size from world.json).
 
     `range_resolution_m` overrides the simulated bin size (the `dataset:` config section), e.g.
-    to study a mis-calibrated range resolution.
+    to study a mis-calibrated range resolution; `azimuth_offset_rad` is added to every azimuth
+    [rad, CCW] (e.g. to study an encoder zero offset).
     """
     from radar_slam.sim.writer import WORLD_FILE, read_json
 
@@ -138,7 +141,9 @@ def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Seq
         resolution_m = float(sensor["range_resolution_m"])
     if range_resolution_m is not None:
         resolution_m = range_resolution_m
-    return MulRanSequence(folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY)
+    return MulRanSequence(
+        folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY, azimuth_offset_rad=azimuth_offset_rad
+    )
 
 
 SYNTHETIC = register(

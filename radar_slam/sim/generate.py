@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
+from radar_slam.sim.manoeuvres import drive_plan, with_roundabout_islands
 from radar_slam.sim.render import Renderer
 from radar_slam.sim.route import Trajectory, drive, route_edges
 from radar_slam.sim.scenarios import Scenario
@@ -106,7 +107,11 @@ def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
     protected = set().union(*(route_edges(list(r)) for r in scenario.town_routes))
     town = generate_town(seed, scenario.town, protected)
     route_rng = np.random.default_rng([seed, scenario.session, ROUTE_STREAM])
-    trajectory = drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    if scenario.plan is None:
+        trajectory = drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    else:
+        town = with_roundabout_islands(town, list(scenario.waypoints), scenario.plan)
+        trajectory = drive_plan(town, list(scenario.waypoints), scenario.plan, route_rng)
     world = build_world(
         town, scenario.objects, seed, scenario.session, duration_s=trajectory.duration_s
     )
@@ -227,6 +232,10 @@ def generate_sequence(
             "moving_vehicles": len(scene.world.traffic),
         },
     }
+    if scenario.plan is not None:
+        description["plan"] = scenario.plan
+    if scenario.held_out:
+        description["held_out"] = True
     write_json(folder / WORLD_FILE, description)
     write_json(
         folder / COMPLETE_MARKER,

@@ -44,7 +44,13 @@ from odometry.preprocess import preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.se2 import between, compose, inverse, wrap_angle
-from odometry.velocity import Velocity, bounded_twist, close_twists
+from odometry.velocity import (
+    REDESKEW_MPS,
+    REDESKEW_RADPS,
+    Velocity,
+    bounded_twist,
+    close_twists,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -370,7 +376,7 @@ class Odometry:
         measured = bounded_twist(
             twist_from_motion(between(base.image_pose, image_pose), interval_s), self.config
         )
-        if close_twists(measured, scan.twist):
+        if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
             return scan, estimate
         again = PreparedScan(scan.polar, measured, self.config)
         redone = register_images(reference.scan, again, self.config, hint=estimate.motion)

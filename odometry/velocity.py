@@ -20,6 +20,12 @@ TWIST_REFRESH_MPS = 0.25
 """A scan is re-rendered when its de-skew velocity is off by more than this [m/s]."""
 TWIST_REFRESH_RADPS = np.deg2rad(2.0)
 """... or its yaw rate by more than this [rad/s]."""
+REDESKEW_MPS = 1.0
+"""A registered scan is de-skewed and registered again when the velocity its registration
+measures differs from the one it was de-skewed with by more than this [m/s] (a velocity error
+smears a mid-sweep image symmetrically: below this it costs less than the second pass gains)."""
+REDESKEW_RADPS = np.deg2rad(5.0)
+"""... or by more than this in yaw rate [rad/s]."""
 
 
 @dataclass(frozen=True)
@@ -69,9 +75,14 @@ def bounded_twist(twist: FloatArray, cfg: OdometryConfig) -> FloatArray:
     return bounded
 
 
-def close_twists(a: FloatArray, b: FloatArray) -> bool:
-    """Two de-skew twists render the same image (within `TWIST_REFRESH_*`)."""
+def close_twists(
+    a: FloatArray,
+    b: FloatArray,
+    speed_mps: float = TWIST_REFRESH_MPS,
+    yaw_rate_radps: float = TWIST_REFRESH_RADPS,
+) -> bool:
+    """Two de-skew twists render nearly the same image: they differ by at most `speed_mps` in
+    velocity and `yaw_rate_radps` in yaw rate."""
     return bool(
-        np.hypot(a[0] - b[0], a[1] - b[1]) <= TWIST_REFRESH_MPS
-        and abs(a[2] - b[2]) <= TWIST_REFRESH_RADPS
+        np.hypot(a[0] - b[0], a[1] - b[1]) <= speed_mps and abs(a[2] - b[2]) <= yaw_rate_radps
     )

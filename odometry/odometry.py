@@ -158,6 +158,15 @@ class Odometry:
         return [r.index for r in self._state.results if r.gap]
 
     @property
+    def longest_gap_run(self) -> int:
+        """The most consecutive gaps so far (more than 2 on driven data is a defect)."""
+        best = run = 0
+        for result in self._state.results:
+            run = run + 1 if result.gap else 0
+            best = max(best, run)
+        return best
+
+    @property
     def keyframes(self) -> list[int]:
         """Indices of the scans that became keyframes."""
         return [r.index for r in self._state.results if r.is_keyframe]

@@ -11,10 +11,14 @@ Two benchmarks:
   (`synthetic/loop`, `synthetic/long`, ...; simulated ones are generated on first use under the
   data root), reporting KITTI-style drift [% and deg/100 m], ATE (Umeyama and first-pose
   alignment), the normalised squared errors (NEES) of the reported covariances and frames/s
-  (register() only, frame loading excluded).
+  (register() only, frame loading excluded), gaps and the longest run of consecutive gaps. With
+  `--stride K` (repeatable) every sequence also runs on every K-th scan (4 Hz data at 2 or 1 Hz);
+  `--held-out SEQ` sequences are reported in their own part of the table (never tune on them);
+  `--table FILE` writes the Markdown table (scenarios x strides) that the README shows.
 
 Usage: python scripts/bench_odometry.py [--frames N] [--speed MPS] [--yaw-rate DPS] [--scan PNG]
        python scripts/bench_odometry.py --sequence synthetic/loop --sequence synthetic/long
+           [--held-out SEQ] [--stride 1 --stride 2 --stride 4] [--table FILE]
            [--data-root DIR] [--max-frames N]
 """
 
@@ -149,15 +153,6 @@ class SequenceRow:
     held_out: bool = False
 
 
-def longest_run(flags: list[bool]) -> int:
-    """Length of the longest run of consecutive True values."""
-    best = run = 0
-    for flag in flags:
-        run = run + 1 if flag else 0
-        best = max(best, run)
-    return best
-
-
 def bench_sequence(
     spec: str,
     data_root: Path | None,
@@ -182,7 +177,7 @@ def bench_sequence(
     ms = np.array(durations[1:]) * 1e3
     stamps = sequence.timestamps_ns[:n]
     estimate = Trajectory(stamps, odometry.poses)
-    gap_run = longest_run([r.gap for r in odometry.results])
+    gap_run = odometry.longest_gap_run
     logger.info(
         "%s: %d frames, %d keyframes, %d gaps (longest run %d); %.1f ms/frame -> %.1f frames/s",
         label,

@@ -143,14 +143,6 @@ def run(frames: list[RadarFrame]) -> Odometry:
     return odometry
 
 
-def longest_gap_run(odometry: Odometry) -> int:
-    best = run_length = 0
-    for r in odometry.results:
-        run_length = run_length + 1 if r.gap else 0
-        best = max(best, run_length)
-    return best
-
-
 def end_error_fraction(odometry: Odometry, truth: FloatArray) -> float:
     end = se2.between(truth[-1], odometry.poses[-1])
     distance = float(np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T)))
@@ -210,7 +202,7 @@ def test_recovery_after_injected_failures(
     frames = [blank(f) if k in dropped else f for k, f in enumerate(frames)]
     odometry = run(frames)
     assert odometry.gaps == list(dropped)
-    assert longest_gap_run(odometry) <= MAX_GAP_RUN
+    assert odometry.longest_gap_run <= MAX_GAP_RUN
     after = odometry.results[dropped[-1] + 1]
     assert after.ok and after.keyframe_index < dropped[0]
     # The scan after the gap is placed by its registration, not by the gap's prediction.
@@ -251,7 +243,7 @@ def test_hard_driving_at_one_hertz(synthetic_root: Path, scenario: str) -> None:
     truth = sequence.ground_truth
     assert truth is not None
     odometry = run([sequence[k] for k in range(len(sequence))])
-    assert longest_gap_run(odometry) <= MAX_GAP_RUN
+    assert odometry.longest_gap_run <= MAX_GAP_RUN
     stamps = sequence.timestamps_ns
     drift = kitti_drift(Trajectory(stamps, odometry.poses), Trajectory(stamps, truth))
     assert drift is not None and drift.segments > 0

@@ -193,12 +193,12 @@ def integrate_legs(
 def speed_profile(path: PathSamples, cfg: PlanDrivingConfig) -> FloatArray:
     """Speed magnitude (K,) at each sample [m/s]: interval limits (cruise, lateral
     acceleration), zero at stops, then acceleration and braking limits in both directions."""
+    if not np.all(np.isfinite(path.speed_limit)):
+        raise RadarSlamError("every leg of a driving plan needs a finite speed limit")
     turn = np.sqrt(cfg.lateral_accel_mps2 / np.maximum(np.abs(path.curvature), 1e-9))
     interval = np.minimum(path.speed_limit, turn)
     v = np.minimum(np.append(interval, np.inf), np.insert(interval, 0, np.inf))
     v[path.stop] = 0.0
-    if not np.all(np.isfinite(v)):
-        raise RadarSlamError("every leg of a driving plan needs a finite speed limit")
     ds = np.diff(path.s)
     for k in range(len(ds)):  # sequential by nature: each speed bounds the next
         v[k + 1] = min(v[k + 1], math.sqrt(v[k] ** 2 + 2 * cfg.accel_mps2 * ds[k]))

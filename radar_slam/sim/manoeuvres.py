@@ -141,11 +141,11 @@ def _u_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
             f"a street {2 * street.half_width_m:.1f} m wide is too narrow for a U-turn on a "
             f"{radius:.1f} m radius: use a three-point turn"
         )
-    shift_r = 2 * cfg.lock_radius_m
+    shift_r, cruise = 2 * cfg.lock_radius_m, street.cruise_mps
     return [
-        *lane_shift(-(radius - off), shift_r),
+        *lane_shift(-(radius - off), shift_r, cruise),
         arc(math.pi, radius, max_speed_mps=cfg.manoeuvre_speed_mps),
-        *lane_shift(radius - off, shift_r),
+        *lane_shift(radius - off, shift_r, cruise),
     ]
 
 
@@ -163,7 +163,7 @@ def _three_point_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
         raise RadarSlamError(
             f"a three-point turn does not fit a {2 * street.half_width_m} m street"
         )
-    pull_over = lane_shift(-(edge - off), 2 * radius)
+    pull_over = lane_shift(-(edge - off), 2 * radius, street.cruise_mps)
     if pull_over:
         pull_over[-1] = replace(pull_over[-1], stop_s=MANOEUVRE_STOP_S)
     return [
@@ -171,7 +171,7 @@ def _three_point_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
         arc(a1, radius, max_speed_mps=speed),
         arc(a2, radius, gear=-1, max_speed_mps=min(speed, cfg.reverse_speed_mps)),
         arc(a3, radius, max_speed_mps=speed),
-        *lane_shift(y3 - off, 2 * radius),
+        *lane_shift(y3 - off, 2 * radius, street.cruise_mps),
     ]
 
 

@@ -271,6 +271,8 @@ _HELD_OUT_MIXED_ROUTE: Waypoints = (
     (1, 2),
 )
 _CI = " Reduced bins (1024, 61 m) for CI."
+_URBAN_SMOOTH = DrivingConfig(min_speed_mps=3.0, cruise_speed_mps=(9.0, 13.5))
+"""The smooth lattice drive at urban speeds (<= 14 m/s), slowing for tight corners."""
 
 
 DRIVING_SCENARIOS: tuple[Scenario, ...] = (
@@ -282,6 +284,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         town_routes=(_TURN_AROUND_ROUTE,),
         start_ns=EPOCH_NS + 7 * DAY_NS,
         town=TownConfig(n_blocks=(4, 3), block_size_m=(70.0, 110.0)),
+        driving=_URBAN_SMOOTH,
     ),
     Scenario(
         name="u_turn",
@@ -356,6 +359,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         town_routes=(_HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 14 * DAY_NS,
         town=TownConfig(n_blocks=(5, 5), block_size_m=(75.0, 125.0)),
+        driving=_URBAN_SMOOTH,
         held_out=True,
     ),
     Scenario(

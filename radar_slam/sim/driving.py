@@ -113,6 +113,21 @@ def lane_shift(delta_left_m: float, radius_m: float, max_speed_mps: float = math
     ]
 
 
+def along_leg(
+    start: tuple[float, float, float], leg: Leg, distance_m: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """x [m], y [m] and heading [rad] (each like `distance_m`) after travelling `distance_m`
+    along `leg` from `start` (x, y, heading): constant-curvature kinematics in closed form."""
+    x0, y0, h0 = start
+    u = np.asarray(distance_m, dtype=np.float64)
+    h = h0 + leg.gear * leg.curvature * u
+    if abs(leg.curvature) < 1e-12:
+        return x0 + leg.gear * u * math.cos(h0), y0 + leg.gear * u * math.sin(h0), h
+    x = x0 + (np.sin(h) - math.sin(h0)) / leg.curvature
+    y = y0 - (np.cos(h) - math.cos(h0)) / leg.curvature
+    return x, y, h
+
+
 @dataclass(frozen=True)
 class PathSamples:
     """A path sampled every ~PATH_STEP_M of distance travelled.
@@ -157,15 +172,8 @@ def integrate_legs(
             raise RadarSlamError(f"leg gear must be +1 or -1, got {leg.gear}")
         n = max(1, int(math.ceil(leg.length_m / step_m)))
         u = np.linspace(0.0, leg.length_m, n + 1)[1:]
-        x0, y0, h0 = xs[-1], ys[-1], hs[-1]
+        x, y, h = along_leg((xs[-1], ys[-1], hs[-1]), leg, u)
         rate = leg.gear * leg.curvature  # heading change per metre travelled
-        h = h0 + rate * u
-        if abs(leg.curvature) < 1e-12:
-            x = x0 + leg.gear * u * math.cos(h0)
-            y = y0 + leg.gear * u * math.sin(h0)
-        else:
-            x = x0 + (np.sin(h) - math.sin(h0)) / leg.curvature
-            y = y0 - (np.cos(h) - math.cos(h0)) / leg.curvature
         xs.extend(x.tolist())
         ys.extend(y.tolist())
         hs.extend(h.tolist())

@@ -31,7 +31,14 @@ from numpy.typing import NDArray
 
 from odometry.se2 import wrap_angle
 from radar_slam.errors import RadarSlamError
-from radar_slam.sim.driving import Leg, PlanDrivingConfig, arc, drive_legs, lane_shift
+from radar_slam.sim.driving import (
+    Leg,
+    PlanDrivingConfig,
+    along_leg,
+    arc,
+    drive_legs,
+    lane_shift,
+)
 from radar_slam.sim.route import Trajectory, expand_waypoints
 from radar_slam.sim.town import FEATURE_STEP_M, FREE, Town
 
@@ -177,20 +184,11 @@ def _three_point_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
 
 def _local_end(legs: list[Leg], cfg: PlanDrivingConfig) -> tuple[float, float, float]:
     """End pose of `legs` driven from (0, -lane offset, 0): longitudinal, lateral, heading."""
-    x, y, h = 0.0, -cfg.lane_offset_m, 0.0
+    pose = (0.0, -cfg.lane_offset_m, 0.0)
     for leg in legs:
-        rate = leg.gear * leg.curvature
-        h1 = h + rate * leg.length_m
-        if abs(leg.curvature) < 1e-12:
-            x, y = (
-                x + leg.gear * leg.length_m * math.cos(h),
-                y + leg.gear * leg.length_m * math.sin(h),
-            )
-        else:
-            x += (math.sin(h1) - math.sin(h)) / leg.curvature
-            y -= (math.cos(h1) - math.cos(h)) / leg.curvature
-        h = h1
-    return x, y, h
+        x, y, h = along_leg(pose, leg, np.array([leg.length_m]))
+        pose = (float(x[0]), float(y[0]), float(h[0]))
+    return pose
 
 
 def _roundabout(turn: float, speed: float, cfg: PlanDrivingConfig) -> tuple[list[Leg], float]:

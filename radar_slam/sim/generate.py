@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -238,7 +238,10 @@ def generate_sequence(
         },
     }
     if scenario.plan is not None:
-        description["plan"] = scenario.plan
+        description["plan"] = {
+            "events": [{"event": type(e).__name__, **asdict(e)} for e in scenario.plan.events],
+            "driving": scenario.plan.driving,
+        }
     if scenario.held_out:
         description["held_out"] = True
     write_json(folder / WORLD_FILE, description)

@@ -113,6 +113,21 @@ def lane_shift(delta_left_m: float, radius_m: float, max_speed_mps: float = math
     ]
 
 
+def along_leg(
+    start: tuple[float, float, float], leg: Leg, distance_m: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """x [m], y [m] and heading [rad] (each like `distance_m`) after travelling `distance_m`
+    along `leg` from `start` (x, y, heading): constant-curvature kinematics in closed form."""
+    x0, y0, h0 = start
+    u = np.asarray(distance_m, dtype=np.float64)
+    h = h0 + leg.gear * leg.curvature * u
+    if abs(leg.curvature) < 1e-12:
+        return x0 + leg.gear * u * math.cos(h0), y0 + leg.gear * u * math.sin(h0), h
+    x = x0 + (np.sin(h) - math.sin(h0)) / leg.curvature
+    y = y0 - (np.cos(h) - math.cos(h0)) / leg.curvature
+    return x, y, h
+
+
 @dataclass(frozen=True)
 class PathSamples:
     """A path sampled every ~PATH_STEP_M of distance travelled.
@@ -157,15 +172,8 @@ def integrate_legs(
             raise RadarSlamError(f"leg gear must be +1 or -1, got {leg.gear}")
         n = max(1, int(math.ceil(leg.length_m / step_m)))
         u = np.linspace(0.0, leg.length_m, n + 1)[1:]
-        x0, y0, h0 = xs[-1], ys[-1], hs[-1]
+        x, y, h = along_leg((xs[-1], ys[-1], hs[-1]), leg, u)
         rate = leg.gear * leg.curvature  # heading change per metre travelled
-        h = h0 + rate * u
-        if abs(leg.curvature) < 1e-12:
-            x = x0 + leg.gear * u * math.cos(h0)
-            y = y0 + leg.gear * u * math.sin(h0)
-        else:
-            x = x0 + (np.sin(h) - math.sin(h0)) / leg.curvature
-            y = y0 - (np.cos(h) - math.cos(h0)) / leg.curvature
         xs.extend(x.tolist())
         ys.extend(y.tolist())
         hs.extend(h.tolist())
@@ -193,12 +201,12 @@ def integrate_legs(
 def speed_profile(path: PathSamples, cfg: PlanDrivingConfig) -> FloatArray:
     """Speed magnitude (K,) at each sample [m/s]: interval limits (cruise, lateral
     acceleration), zero at stops, then acceleration and braking limits in both directions."""
+    if not np.all(np.isfinite(path.speed_limit)):
+        raise RadarSlamError("every leg of a driving plan needs a finite speed limit")
     turn = np.sqrt(cfg.lateral_accel_mps2 / np.maximum(np.abs(path.curvature), 1e-9))
     interval = np.minimum(path.speed_limit, turn)
     v = np.minimum(np.append(interval, np.inf), np.insert(interval, 0, np.inf))
     v[path.stop] = 0.0
-    if not np.all(np.isfinite(v)):
-        raise RadarSlamError("every leg of a driving plan needs a finite speed limit")
     ds = np.diff(path.s)
     for k in range(len(ds)):  # sequential by nature: each speed bounds the next
         v[k + 1] = min(v[k + 1], math.sqrt(v[k] ** 2 + 2 * cfg.accel_mps2 * ds[k]))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -101,17 +101,22 @@ def make_renderer(scene: Scene) -> Renderer:
     return Renderer(scene.world, scene.trajectory, scene.scenario.sensor, scene.scenario.physics)
 
 
-def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
-    """Lay out, populate and drive a scenario (no rendering)."""
-    seed = scenario.seed if seed is None else int(seed)
+def lay_out(scenario: Scenario, seed: int) -> tuple[Town, Trajectory]:
+    """The town of a scenario (with its route's streets protected) and the ego drive through it
+    (smooth lattice drive, or the scenario's plan); no world contents, no rendering."""
     protected = set().union(*(route_edges(list(r)) for r in scenario.town_routes))
     town = generate_town(seed, scenario.town, protected)
     route_rng = np.random.default_rng([seed, scenario.session, ROUTE_STREAM])
     if scenario.plan is None:
-        trajectory = drive(town, list(scenario.waypoints), scenario.driving, route_rng)
-    else:
-        town = with_roundabout_islands(town, list(scenario.waypoints), scenario.plan)
-        trajectory = drive_plan(town, list(scenario.waypoints), scenario.plan, route_rng)
+        return town, drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    town = with_roundabout_islands(town, list(scenario.waypoints), scenario.plan)
+    return town, drive_plan(town, list(scenario.waypoints), scenario.plan, route_rng)
+
+
+def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
+    """Lay out, populate and drive a scenario (no rendering)."""
+    seed = scenario.seed if seed is None else int(seed)
+    town, trajectory = lay_out(scenario, seed)
     world = build_world(
         town, scenario.objects, seed, scenario.session, duration_s=trajectory.duration_s
     )
@@ -233,7 +238,10 @@ def generate_sequence(
         },
     }
     if scenario.plan is not None:
-        description["plan"] = scenario.plan
+        description["plan"] = {
+            "events": [{"event": type(e).__name__, **asdict(e)} for e in scenario.plan.events],
+            "driving": scenario.plan.driving,
+        }
     if scenario.held_out:
         description["held_out"] = True
     write_json(folder / WORLD_FILE, description)

@@ -31,7 +31,14 @@ from numpy.typing import NDArray
 
 from odometry.se2 import wrap_angle
 from radar_slam.errors import RadarSlamError
-from radar_slam.sim.driving import Leg, PlanDrivingConfig, arc, drive_legs, lane_shift
+from radar_slam.sim.driving import (
+    Leg,
+    PlanDrivingConfig,
+    along_leg,
+    arc,
+    drive_legs,
+    lane_shift,
+)
 from radar_slam.sim.route import Trajectory, expand_waypoints
 from radar_slam.sim.town import FEATURE_STEP_M, FREE, Town
 
@@ -141,11 +148,11 @@ def _u_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
             f"a street {2 * street.half_width_m:.1f} m wide is too narrow for a U-turn on a "
             f"{radius:.1f} m radius: use a three-point turn"
         )
-    shift_r = 2 * cfg.lock_radius_m
+    shift_r, cruise = 2 * cfg.lock_radius_m, street.cruise_mps
     return [
-        *lane_shift(-(radius - off), shift_r),
+        *lane_shift(-(radius - off), shift_r, cruise),
         arc(math.pi, radius, max_speed_mps=cfg.manoeuvre_speed_mps),
-        *lane_shift(radius - off, shift_r),
+        *lane_shift(radius - off, shift_r, cruise),
     ]
 
 
@@ -163,7 +170,7 @@ def _three_point_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
         raise RadarSlamError(
             f"a three-point turn does not fit a {2 * street.half_width_m} m street"
         )
-    pull_over = lane_shift(-(edge - off), 2 * radius)
+    pull_over = lane_shift(-(edge - off), 2 * radius, street.cruise_mps)
     if pull_over:
         pull_over[-1] = replace(pull_over[-1], stop_s=MANOEUVRE_STOP_S)
     return [
@@ -171,26 +178,17 @@ def _three_point_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
         arc(a1, radius, max_speed_mps=speed),
         arc(a2, radius, gear=-1, max_speed_mps=min(speed, cfg.reverse_speed_mps)),
         arc(a3, radius, max_speed_mps=speed),
-        *lane_shift(y3 - off, 2 * radius),
+        *lane_shift(y3 - off, 2 * radius, street.cruise_mps),
     ]
 
 
 def _local_end(legs: list[Leg], cfg: PlanDrivingConfig) -> tuple[float, float, float]:
     """End pose of `legs` driven from (0, -lane offset, 0): longitudinal, lateral, heading."""
-    x, y, h = 0.0, -cfg.lane_offset_m, 0.0
+    pose = (0.0, -cfg.lane_offset_m, 0.0)
     for leg in legs:
-        rate = leg.gear * leg.curvature
-        h1 = h + rate * leg.length_m
-        if abs(leg.curvature) < 1e-12:
-            x, y = (
-                x + leg.gear * leg.length_m * math.cos(h),
-                y + leg.gear * leg.length_m * math.sin(h),
-            )
-        else:
-            x += (math.sin(h1) - math.sin(h)) / leg.curvature
-            y -= (math.cos(h1) - math.cos(h)) / leg.curvature
-        h = h1
-    return x, y, h
+        x, y, h = along_leg(pose, leg, np.array([leg.length_m]))
+        pose = (float(x[0]), float(y[0]), float(h[0]))
+    return pose
 
 
 def _roundabout(turn: float, speed: float, cfg: PlanDrivingConfig) -> tuple[list[Leg], float]:

@@ -12,6 +12,11 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 | multisession_a | session A of a town shared with multisession_b | 351 | 0.9 km |
 | multisession_b | another route sharing streets; cars, vegetation, traffic changed | 522 | 1.2 km |
 | long | three loops, revisits in both directions: benchmarks | 1588 | 4.2 km |
+
+Driving scenarios (`DRIVING_SCENARIOS`, each also as `tiny_<name>` at 1024 bins for CI):
+turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear, and
+the held-out heldout_town and heldout_mixed (`HELD_OUT`: benchmarks report them separately and
+nobody tunes on them). All but turn_around drive a plan (manoeuvres.py) with stepped curvature.
 """
 
 from __future__ import annotations
@@ -255,8 +260,10 @@ _HELD_OUT_TOWN_ROUTE: Waypoints = (
     (2, 3),
     (2, 2),
     (0, 2),
+    (1, 2),
 )
-"""Out, round a block with a turn back along the street it came (as the 25 % drift town drive)."""
+"""Out, round a block and back along the street it came (as the 25 % drift town drive), on, and
+back again after a U-turn."""
 _HELD_OUT_MIXED_ROUTE: Waypoints = (
     (0, 1),
     (1, 1),
@@ -271,6 +278,8 @@ _HELD_OUT_MIXED_ROUTE: Waypoints = (
     (1, 2),
 )
 _CI = " Reduced bins (1024, 61 m) for CI."
+_URBAN_SMOOTH = DrivingConfig(min_speed_mps=3.0, cruise_speed_mps=(9.0, 13.5))
+"""The smooth lattice drive at urban speeds (<= 14 m/s), slowing for tight corners."""
 
 
 DRIVING_SCENARIOS: tuple[Scenario, ...] = (
@@ -282,6 +291,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         town_routes=(_TURN_AROUND_ROUTE,),
         start_ns=EPOCH_NS + 7 * DAY_NS,
         town=TownConfig(n_blocks=(4, 3), block_size_m=(70.0, 110.0)),
+        driving=_URBAN_SMOOTH,
     ),
     Scenario(
         name="u_turn",
@@ -350,12 +360,17 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
     ),
     Scenario(
         name="heldout_town",
-        description="HELD OUT: 1.3 km through another town with a turn back round a block",
+        description="HELD OUT: 1.2 km through another town: stepped junction turns, a turn back "
+        "round a block, three stops, a U-turn",
         seed=41,
         waypoints=_HELD_OUT_TOWN_ROUTE,
         town_routes=(_HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 14 * DAY_NS,
-        town=TownConfig(n_blocks=(5, 5), block_size_m=(75.0, 125.0)),
+        town=_plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
+        plan=DrivePlan(
+            events=(Stop(2, 10.0), Stop(8, 5.0), Stop(11, 10.0), TurnAround(12, "u_turn", 45.0)),
+            driving=PlanDrivingConfig(cruise_speed_mps=(11.0, 14.0)),
+        ),
         held_out=True,
     ),
     Scenario(

@@ -136,12 +136,17 @@ class TranslationConfig:
         fine_search_px: the fine peak is searched within this many fine pixels of the coarse
             estimate.
         use_fine: run the fine (near range, full resolution) level after the coarse one.
+        hint_radius_m: a registration seeded with a hint (a motion model's prediction) searches
+            the coarse translation peak within this distance of the hint's translation [m] (the
+            error of a constant-velocity prediction at 1 Hz: a few m/s^2 of braking or
+            acceleration over the interval).
     """
 
     smoothing_px: float = 1.0
     whitening: float = 1.0
     fine_search_px: int = 6
     use_fine: bool = True
+    hint_radius_m: float = 4.0
 
     def __post_init__(self) -> None:
         checks.non_negative("smoothing_px", self.smoothing_px)
@@ -159,7 +164,8 @@ class QualityConfig:
         max_speed_mps: a motion faster than this is implausible [m/s].
         max_yaw_rate_dps: a rotation faster than this is implausible [deg/s].
         max_prediction_error_m: in `Odometry`, an estimate farther than this from the
-            constant-velocity prediction is rejected [m].
+            constant-velocity prediction is checked against a registration seeded with the
+            prediction; the stronger correlation wins (the prediction never vetoes) [m].
         max_prediction_error_deg: the same for the rotation [deg].
         min_sigma_xy_m: floor of the translation standard deviation [m].
         min_sigma_yaw_deg: floor of the rotation standard deviation [deg].
@@ -243,7 +249,10 @@ class DeskewConfig:
             between the scans' reference times follows with the velocity.
         yaw_rate_extrapolation: in `Odometry`, the yaw rate wanted at a time (to de-skew a scan,
             or to move a pose from mid-sweep to the reference time) is the last measured one
-            plus this fraction of its trend extrapolated to that time (0: constant velocity).
+            plus this fraction of its trend extrapolated to that time (0: constant velocity);
+            the extrapolated change is bounded by the last measured change and never turns the
+            yaw rate to the other side. It never enters the prediction a registration is
+            compared with.
     """
 
     enabled: bool = True

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from odometry import OdometryConfig, estimate_motion, se2
+from odometry import OdometryConfig, estimate_motion
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry
 from radar_slam.datasets.frame import RadarFrame
@@ -26,6 +26,7 @@ from radar_slam.sim.generate import Scene, build_scene, generate_sequence, make_
 from radar_slam.sim.render import RenderTables, render_scan
 from radar_slam.sim.scenarios import get_scenario
 from radar_slam.trajectory import Trajectory
+from raplace import se2
 from raplace.units import NS_PER_S
 
 SCAN_PERIOD_S = 0.25

@@ -19,6 +19,7 @@ from radar_slam.commands.bag_options import (
     reopen_with_bag_options,
 )
 from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
+from radar_slam.datasets.stride import strided
 from radar_slam.outputs import (
     odometry_summary,
     slam_summary,
@@ -62,6 +63,9 @@ VIEWER_OPTION = typer.Option(  # issue-14
 MAX_FRAMES_OPTION = typer.Option(
     None, "--max-frames", min=1, help="Process only the first N scans."
 )
+STRIDE_OPTION = typer.Option(  # issue 10: strided view of the sequence
+    1, "--stride", min=1, help="Use every K-th scan (4 Hz data at --stride 4 is 1 Hz)."
+)
 
 
 def without_loops(config: PipelineConfig) -> PipelineConfig:
@@ -75,6 +79,7 @@ def run_command(
     out: Path | None = OUT_OPTION,
     config: Path | None = CONFIG_OPTION,
     max_frames: int | None = MAX_FRAMES_OPTION,
+    stride: int = STRIDE_OPTION,
     no_loops: bool = typer.Option(
         False, "--no-loops", help="Odometry and pose graph only, no loop closing."
     ),
@@ -92,6 +97,7 @@ def run_command(
     seq, settings = reopen_with_bag_options(
         sequence, data_root, seq, settings, topic, gt_topic, layout
     )
+    seq = strided(seq, stride)
     check_result_location(seq.family, seq.name, out)  # before the run, not after it
     if no_loops:
         settings = without_loops(settings)
@@ -111,6 +117,7 @@ def odometry_command(
     out: Path | None = OUT_OPTION,
     config: Path | None = CONFIG_OPTION,
     max_frames: int | None = MAX_FRAMES_OPTION,
+    stride: int = STRIDE_OPTION,
     data_root: Path | None = DATA_ROOT_OPTION,
     topic: str | None = TOPIC_OPTION,  # issue-14: ROS bag input
     gt_topic: str | None = GT_TOPIC_OPTION,
@@ -123,6 +130,7 @@ def odometry_command(
     seq, settings = reopen_with_bag_options(
         sequence, data_root, seq, settings, topic, gt_topic, layout
     )
+    seq = strided(seq, stride)
     check_result_location(seq.family, seq.name, out)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}", loops=False) as update:

@@ -120,12 +120,19 @@ class OxfordFormScan:
     azimuths_rad: NDArray[np.float64]
     azimuth_times_ns: NDArray[np.int64]
 
-    def frame(self, timestamp_ns: int, range_resolution_m: float, sensor: str) -> RadarFrame:
-        """The scan as a `RadarFrame` with the given reference time [ns], bin size [m], sensor."""
+    def frame(
+        self,
+        timestamp_ns: int,
+        range_resolution_m: float,
+        sensor: str,
+        azimuth_offset_rad: float = 0.0,
+    ) -> RadarFrame:
+        """The scan as a `RadarFrame` with the given reference time [ns], bin size [m], sensor,
+        its azimuths turned by `azimuth_offset_rad` [rad, CCW]."""
         return RadarFrame(
             timestamp_ns=int(timestamp_ns),
             polar=self.polar,
-            azimuths_rad=self.azimuths_rad,
+            azimuths_rad=self.azimuths_rad + azimuth_offset_rad,
             range_resolution_m=range_resolution_m,
             sensor=sensor,
             azimuth_times_ns=self.azimuth_times_ns,

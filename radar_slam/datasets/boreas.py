@@ -139,7 +139,12 @@ class BoreasSequence:
 
     family: str = BOREAS_FAMILY
 
-    def __init__(self, folder: Path, range_resolution_m: float | None = None) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        range_resolution_m: float | None = None,
+        azimuth_offset_rad: float = 0.0,
+    ) -> None:
         folder = Path(folder)
         radar = folder / RADAR_FOLDER
         if not radar.is_dir():
@@ -158,6 +163,7 @@ class BoreasSequence:
             )
         self.name: str = folder.name
         self.folder = folder
+        self.azimuth_offset_rad = float(azimuth_offset_rad)
         self.range_resolution_m = float(range_resolution_m)
         self._paths = paths
         self._times_ns = scan_us * NS_PER_US
@@ -189,7 +195,12 @@ class BoreasSequence:
                 )
             self._shape = (int(image.shape[0]), int(image.shape[1]))
         scan = decode_oxford_form(image, path, NS_PER_US)
-        return scan.frame(int(self._times_ns[index]), self.range_resolution_m, BOREAS_SENSOR)
+        return scan.frame(
+            int(self._times_ns[index]),
+            self.range_resolution_m,
+            BOREAS_SENSOR,
+            azimuth_offset_rad=self.azimuth_offset_rad,
+        )
 
     @property
     def timestamps_ns(self) -> NDArray[np.int64]:

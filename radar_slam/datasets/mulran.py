@@ -265,6 +265,7 @@ class MulRanSequence:
         range_resolution_m: size of one bin [m].
         family: family name reported by the sequence (a generator writing MulRan layout may pass
             its own).
+        azimuth_offset_rad: added to every azimuth [rad, CCW] (the `dataset:` config section).
 
     Raises:
         DatasetNotFoundError: `folder` does not exist.
@@ -278,6 +279,7 @@ class MulRanSequence:
         n_bins: int = MULRAN_N_BINS,
         range_resolution_m: float = MULRAN_RANGE_RESOLUTION_M,
         family: str = MULRAN_FAMILY,
+        azimuth_offset_rad: float = 0.0,
     ) -> None:
         folder = Path(folder)
         if not folder.is_dir():
@@ -295,6 +297,7 @@ class MulRanSequence:
         self.scan_folder = scans
         self.n_bins = n_bins
         self.range_resolution_m = range_resolution_m
+        self.azimuth_offset_rad = float(azimuth_offset_rad)
         self._paths = paths
         self._stamps = stamps
         self._stamps.flags.writeable = False
@@ -351,7 +354,7 @@ class MulRanSequence:
         return RadarFrame(
             timestamp_ns=stamp,
             polar=polar,
-            azimuths_rad=azimuths,
+            azimuths_rad=azimuths + self.azimuth_offset_rad,
             range_resolution_m=self.range_resolution_m,
             sensor=MULRAN_SENSOR,
             azimuth_times_ns=azimuth_times,

@@ -193,6 +193,7 @@ class OxfordSequence:
     Args:
         folder: the sequence folder (holding `radar/` and `radar.timestamps`).
         range_resolution_m: size of one range bin [m] (documentation 0.0438; SDK 0.0432).
+        azimuth_offset_rad: added to every azimuth [rad, CCW] (the `dataset:` config section).
 
     Raises:
         DatasetNotFoundError: `folder` or its `radar/` folder does not exist.
@@ -202,7 +203,12 @@ class OxfordSequence:
 
     family: str = OXFORD_FAMILY
 
-    def __init__(self, folder: Path, range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M,
+        azimuth_offset_rad: float = 0.0,
+    ) -> None:
         folder = Path(folder)
         radar = folder / RADAR_FOLDER
         if not radar.is_dir():
@@ -237,6 +243,7 @@ class OxfordSequence:
         self.name: str = folder.name
         self.folder = folder
         self.range_resolution_m = range_resolution_m
+        self.azimuth_offset_rad = float(azimuth_offset_rad)
         self._paths = paths
         self._scan_us = scan_us
         gt_path = folder / ODOMETRY_FILE
@@ -262,7 +269,12 @@ class OxfordSequence:
         path = self._paths[index]
         image = read_gray_png(path, (OXFORD_N_AZIMUTHS, OXFORD_HEADER_BYTES + OXFORD_N_BINS))
         scan = decode_oxford_form(image, path, NS_PER_US)
-        return scan.frame(int(self._times_ns[index]), self.range_resolution_m, OXFORD_SENSOR)
+        return scan.frame(
+            int(self._times_ns[index]),
+            self.range_resolution_m,
+            OXFORD_SENSOR,
+            azimuth_offset_rad=self.azimuth_offset_rad,
+        )
 
     @property
     def timestamps_ns(self) -> NDArray[np.int64]:

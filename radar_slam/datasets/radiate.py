@@ -98,7 +98,10 @@ class RadiateSequence:
     family: str = RADIATE_FAMILY
 
     def __init__(
-        self, folder: Path, range_resolution_m: float = RADIATE_RANGE_RESOLUTION_M
+        self,
+        folder: Path,
+        range_resolution_m: float = RADIATE_RANGE_RESOLUTION_M,
+        azimuth_offset_rad: float = 0.0,
     ) -> None:
         folder = Path(folder)
         polar = folder / POLAR_FOLDER
@@ -114,6 +117,7 @@ class RadiateSequence:
             )
         self.name: str = folder.name
         self.folder = folder
+        self.azimuth_offset_rad = float(azimuth_offset_rad)
         self.range_resolution_m = range_resolution_m
         self._paths = paths
         self._times_ns = stamps
@@ -134,7 +138,7 @@ class RadiateSequence:
         return RadarFrame(
             timestamp_ns=int(self._times_ns[index]),
             polar=np.ascontiguousarray(image.T),
-            azimuths_rad=radiate_azimuths_rad(),
+            azimuths_rad=radiate_azimuths_rad() + self.azimuth_offset_rad,
             range_resolution_m=self.range_resolution_m,
             sensor=RADIATE_SENSOR,
         )

@@ -39,9 +39,13 @@ class DatasetConfig:
         layout: ROS bags: image layout preset ("radar-slam", "navtech", "mulran").
         rows, azimuth_direction: ROS bags: override the preset ("azimuths" or "bins" per row;
             "cw" or "ccw" seen from above).
+        azimuth_offset_rad: added to every scan azimuth [rad, CCW]: an encoder zero that is
+            not the vehicle's forward axis (or the ground truth's). None is 0 (no correction);
+            see the README for what the Oxford samples show.
     """
 
     range_resolution_m: float | None = None
+    azimuth_offset_rad: float | None = None
     # ROS bags only (radar_slam.datasets.rosbag): scan and GT topics, image layout.
     topic: str | None = None
     gt_topic: str | None = None
@@ -52,6 +56,8 @@ class DatasetConfig:
     def __post_init__(self) -> None:
         if self.range_resolution_m is not None:
             checks.positive("range_resolution_m", self.range_resolution_m)
+        if self.azimuth_offset_rad is not None:
+            checks.finite("azimuth_offset_rad", self.azimuth_offset_rad)
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""
@@ -84,7 +90,7 @@ class Family:
     obtain: str
     resolve: Callable[[Path, str], Path] | None = None
     detect_priority: int = 0
-    options: tuple[str, ...] = ("range_resolution_m",)
+    options: tuple[str, ...] = ("range_resolution_m", "azimuth_offset_rad")
 
 
 _FAMILIES: dict[str, Family] = {}

@@ -6,10 +6,13 @@ Modules, in pipeline order:
     scatterers.py the world's data model: scatterers, occluders, traffic, World
     world.py      a town populated with scatterers: facades, cars, vegetation, traffic
     route.py      the ego vehicle's drive through the streets (5-15 m/s, smooth turns)
+    driving.py    drives of constant-curvature legs: reverse gear, stops, stepped curvature
+    manoeuvres.py plans: a route plus stops, roundabouts, U-turns, three-point turns, reversing
     sensor.py     scan geometry and timing (CIR204-H by default)
     physics.py    every physical effect as a named, configurable dataclass
     render.py     vectorised rendering of one polar scan
-    scenarios.py  named scenarios: tiny, tiny_loop, loop, reverse, multisession_a/_b, long
+    scenarios.py  named scenarios: tiny, tiny_loop, loop, reverse, multisession_a/_b, long, and
+                  the driving scenarios (turn_around ... reverse_gear, held out: heldout_*)
     generate.py   build a scene and write a sequence
     writer.py     the files (polar PNGs, global_pose.csv, stamps, world.json, marker)
     figure.py     overview figure (matplotlib)

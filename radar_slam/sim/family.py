@@ -123,11 +123,14 @@ def resolve_synthetic(root: Path, name: str) -> Path:
     return folder
 
 
-def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> RadarSequence:
+def open_synthetic(
+    folder: Path, range_resolution_m: float | None = None, azimuth_offset_rad: float = 0.0
+) -> RadarSequence:
     """Open a simulated sequence with the MulRan loader (bin count and size from world.json).
 
     `range_resolution_m` overrides the simulated bin size (the `dataset:` config section), e.g.
-    to study a mis-calibrated range resolution.
+    to study a mis-calibrated range resolution; `azimuth_offset_rad` is added to every azimuth
+    [rad, CCW] (e.g. to study an encoder zero offset).
     """
     folder = Path(folder)
     marker = _marker(folder)
@@ -144,7 +147,9 @@ def open_synthetic(folder: Path, range_resolution_m: float | None = None) -> Rad
         resolution_m = float(sensor["range_resolution_m"])
     if range_resolution_m is not None:
         resolution_m = range_resolution_m
-    sequence = MulRanSequence(folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY)
+    sequence = MulRanSequence(
+        folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY, azimuth_offset_rad=azimuth_offset_rad
+    )
     frames = marker.get("frames")
     if isinstance(frames, int) and len(sequence) != frames:
         raise DatasetFormatError(

@@ -10,13 +10,14 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
+from radar_slam.sim.manoeuvres import drive_plan, with_roundabout_islands
 from radar_slam.sim.render import Renderer
 from radar_slam.sim.route import Trajectory, drive, route_edges
 from radar_slam.sim.scatterers import World
@@ -102,13 +103,22 @@ def make_renderer(scene: Scene) -> Renderer:
     return Renderer(scene.world, scene.trajectory, scene.scenario.sensor, scene.scenario.physics)
 
 
-def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
-    """Lay out, populate and drive a scenario (no rendering)."""
-    seed = scenario.seed if seed is None else int(seed)
+def lay_out(scenario: Scenario, seed: int) -> tuple[Town, Trajectory]:
+    """The town of a scenario (with its route's streets protected) and the ego drive through it
+    (smooth lattice drive, or the scenario's plan); no world contents, no rendering."""
     protected = set().union(*(route_edges(list(r)) for r in scenario.town_routes))
     town = generate_town(seed, scenario.town, protected)
     route_rng = np.random.default_rng([seed, scenario.session, ROUTE_STREAM])
-    trajectory = drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    if scenario.plan is None:
+        return town, drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    town = with_roundabout_islands(town, list(scenario.waypoints), scenario.plan)
+    return town, drive_plan(town, list(scenario.waypoints), scenario.plan, route_rng)
+
+
+def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
+    """Lay out, populate and drive a scenario (no rendering)."""
+    seed = scenario.seed if seed is None else int(seed)
+    town, trajectory = lay_out(scenario, seed)
     world = build_world(
         town, scenario.objects, seed, scenario.session, duration_s=trajectory.duration_s
     )
@@ -191,7 +201,7 @@ def world_description(scene: Scene, summary: GeneratedSequence) -> dict[str, obj
     """world.json: the scenario, its settings, the route and statistics of the world."""
     scenario = scene.scenario
     n_frames = summary.n_frames
-    return {
+    description: dict[str, object] = {
         "simulator_version": SIM_VERSION,
         "scenario": scenario.name,
         "description": scenario.description,
@@ -219,6 +229,14 @@ def world_description(scene: Scene, summary: GeneratedSequence) -> dict[str, obj
             "moving_vehicles": len(scene.world.traffic),
         },
     }
+    if scenario.plan is not None:
+        description["plan"] = {
+            "events": [{"event": type(e).__name__, **asdict(e)} for e in scenario.plan.events],
+            "driving": scenario.plan.driving,
+        }
+    if scenario.held_out:
+        description["held_out"] = True
+    return description
 
 
 def generate_sequence(

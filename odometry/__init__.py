@@ -8,7 +8,7 @@ class OdometryError(ValueError):
 from odometry.config import OdometryConfig  # noqa: E402  (after OdometryError, which they use)
 from odometry.odometry import Odometry, OdometryResult  # noqa: E402
 from odometry.registration import MotionEstimate, estimate_motion  # noqa: E402
-from odometry.scan import Scan  # noqa: E402
+from odometry.scan import RadarFrame, Scan  # noqa: E402
 
 __all__ = [
     "MotionEstimate",
@@ -16,6 +16,7 @@ __all__ = [
     "OdometryConfig",
     "OdometryError",
     "OdometryResult",
+    "RadarFrame",
     "Scan",
     "estimate_motion",
 ]

@@ -10,6 +10,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from raplace import checks
+
+MIN_IMAGE_PX = 8
+"""Smallest Cartesian image side accepted [pixels] (a peak fit needs a few pixels each side)."""
+
 
 @dataclass(frozen=True)
 class PreprocessConfig:
@@ -34,6 +39,14 @@ class PreprocessConfig:
     noise_floor_sigmas: float = 0.0
     gamma: float = 1.0
 
+    def __post_init__(self) -> None:
+        checks.positive("bin_size_m", self.bin_size_m)
+        checks.non_negative("min_range_m", self.min_range_m)
+        checks.positive("max_range_m", self.max_range_m)
+        checks.less("min_range_m", self.min_range_m, "max_range_m", self.max_range_m)
+        checks.finite("noise_floor_sigmas", self.noise_floor_sigmas)
+        checks.positive("gamma", self.gamma)
+
 
 @dataclass(frozen=True)
 class LevelConfig:
@@ -49,6 +62,12 @@ class LevelConfig:
     cell_m: float
     size_px: int
     taper_fraction: float = 0.3
+
+    def __post_init__(self) -> None:
+        checks.positive("cell_m", self.cell_m)
+        checks.at_least("size_px", self.size_px, MIN_IMAGE_PX)
+        checks.even("size_px", self.size_px)
+        checks.in_range("taper_fraction", self.taper_fraction, 0.0, 1.0, open_low=True)
 
 
 @dataclass(frozen=True)
@@ -85,6 +104,25 @@ class RotationConfig:
     refine_range_step_m: float = 0.5
     refine_smoothing_bins: float = 2.0
 
+    def __post_init__(self) -> None:
+        checks.at_least("n_angles", self.n_angles, 2)
+        checks.at_least("n_radii", self.n_radii, 2)
+        checks.in_range("min_frequency", self.min_frequency, 0.0, 1.0)
+        checks.in_range("max_frequency", self.max_frequency, 0.0, 1.0, open_low=True)
+        checks.less("min_frequency", self.min_frequency, "max_frequency", self.max_frequency)
+        checks.non_negative("smoothing_bins", self.smoothing_bins)
+        checks.at_least("refine_n_angles", self.refine_n_angles, 2)
+        checks.non_negative("refine_min_range_m", self.refine_min_range_m)
+        checks.positive("refine_max_range_m", self.refine_max_range_m)
+        checks.less(
+            "refine_min_range_m",
+            self.refine_min_range_m,
+            "refine_max_range_m",
+            self.refine_max_range_m,
+        )
+        checks.positive("refine_range_step_m", self.refine_range_step_m)
+        checks.non_negative("refine_smoothing_bins", self.refine_smoothing_bins)
+
 
 @dataclass(frozen=True)
 class TranslationConfig:
@@ -98,12 +136,22 @@ class TranslationConfig:
         fine_search_px: the fine peak is searched within this many fine pixels of the coarse
             estimate.
         use_fine: run the fine (near range, full resolution) level after the coarse one.
+        hint_radius_m: a registration seeded with a hint (a motion model's prediction) searches
+            the coarse translation peak within this distance of the hint's translation [m] (the
+            error of a constant-velocity prediction at 1 Hz: a few m/s^2 of braking or
+            acceleration over the interval).
     """
 
     smoothing_px: float = 1.0
     whitening: float = 1.0
     fine_search_px: int = 6
     use_fine: bool = True
+    hint_radius_m: float = 4.0
+
+    def __post_init__(self) -> None:
+        checks.non_negative("smoothing_px", self.smoothing_px)
+        checks.in_range("whitening", self.whitening, 0.0, 1.0)
+        checks.at_least("fine_search_px", self.fine_search_px, 1)
 
 
 @dataclass(frozen=True)
@@ -116,7 +164,8 @@ class QualityConfig:
         max_speed_mps: a motion faster than this is implausible [m/s].
         max_yaw_rate_dps: a rotation faster than this is implausible [deg/s].
         max_prediction_error_m: in `Odometry`, an estimate farther than this from the
-            constant-velocity prediction is rejected [m].
+            constant-velocity prediction is checked against a registration seeded with the
+            prediction; the stronger correlation wins (the prediction never vetoes) [m].
         max_prediction_error_deg: the same for the rotation [deg].
         min_sigma_xy_m: floor of the translation standard deviation [m].
         min_sigma_yaw_deg: floor of the rotation standard deviation [deg].
@@ -142,6 +191,26 @@ class QualityConfig:
     gap_sigma_yaw_deg: float = 5.0
     velocity_lag_fraction: float = 0.25
 
+    def __post_init__(self) -> None:
+        for name in (
+            "min_peak_quality",
+            "max_coarse_fine_disagreement_m",
+            "max_speed_mps",
+            "max_yaw_rate_dps",
+            "max_prediction_error_m",
+            "max_prediction_error_deg",
+        ):
+            checks.non_negative(name, getattr(self, name), allow_inf=True)
+        for name in (
+            "min_sigma_xy_m",
+            "min_sigma_yaw_deg",
+            "sigma_scale",
+            "gap_sigma_xy_m",
+            "gap_sigma_yaw_deg",
+        ):
+            checks.positive(name, getattr(self, name))
+        checks.non_negative("velocity_lag_fraction", self.velocity_lag_fraction)
+
 
 @dataclass(frozen=True)
 class KeyframeConfig:
@@ -159,6 +228,12 @@ class KeyframeConfig:
     min_peak_quality: float = 12.0
     max_frames: int = 8
 
+    def __post_init__(self) -> None:
+        checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
+        checks.positive("max_rotation_deg", self.max_rotation_deg, allow_inf=True)
+        checks.non_negative("min_peak_quality", self.min_peak_quality)
+        checks.at_least("max_frames", self.max_frames, 1)
+
 
 @dataclass(frozen=True)
 class DeskewConfig:
@@ -174,13 +249,20 @@ class DeskewConfig:
             between the scans' reference times follows with the velocity.
         yaw_rate_extrapolation: in `Odometry`, the yaw rate wanted at a time (to de-skew a scan,
             or to move a pose from mid-sweep to the reference time) is the last measured one
-            plus this fraction of its trend extrapolated to that time (0: constant velocity).
+            plus this fraction of its trend extrapolated to that time (0: constant velocity);
+            the extrapolated change is bounded by the last measured change and never turns the
+            yaw rate to the other side. It never enters the prediction a registration is
+            compared with.
     """
 
     enabled: bool = True
     iterations: int = 1
     mid_sweep: bool = True
     yaw_rate_extrapolation: float = 1.0
+
+    def __post_init__(self) -> None:
+        checks.at_least("iterations", self.iterations, 0)
+        checks.finite("yaw_rate_extrapolation", self.yaw_rate_extrapolation)
 
 
 def _coarse() -> LevelConfig:

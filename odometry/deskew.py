@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.se2 import wrap_angle
+from raplace.se2 import wrap_angle
 
 FloatImage = NDArray[np.float32]
 SMALL_ANGLE_RAD = 1e-6

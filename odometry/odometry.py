@@ -11,19 +11,26 @@ image symmetrically instead of displacing it; registrations chain the image pose
 at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
 measured between the last two image poses; that move's error does not accumulate, and its
 covariance is added to the registration's. The velocity used for de-skewing follows the trend of
-the yaw rate (`DeskewConfig.yaw_rate_extrapolation`): in a turn the yaw rate changes by several
-degrees per second from one scan to the next, and a stale one bends the de-skewed image.
+the yaw rate (`DeskewConfig.yaw_rate_extrapolation`), bounded so that it never extrapolates more
+than the last measured change nor turns the yaw rate to the other side. When the velocity a scan
+was de-skewed with is far from the one its registration then measures (hard braking, a curvature
+step at a junction), the scan is re-rendered with the measured one and registered again.
 
-A failed registration (weak peak, implausible or off-prediction motion) is retried against the
-previous scan (which then becomes the reference and the scan the new keyframe); if that fails
-too, the pose comes from the constant-velocity prediction, the result says so (`ok=False`,
-`gap=True`, a large covariance), and the keyframe stays, so the next scan tries it first. The
-motion is never silently set to zero.
+Each registration is global (rotation over the full circle, translation over the whole coarse
+image; `registration.register_images`); the constant-velocity prediction is a search hint, never
+a veto. When the global estimate fails or disagrees with the prediction, the scan is registered
+again seeded with the prediction, and the stronger correlation wins: the images decide. A strong
+registration therefore ends any run of failures at once, whatever the motion model expected.
+
+When the keyframe cannot be registered, the last registered scan and then the previous scan are
+tried (the reference becomes the new keyframe); if all fail, the pose comes from the
+constant-velocity prediction, the result says so (`ok=False`, `gap=True`, a large covariance),
+and the keyframe stays, so the next scan tries it first, again with a global search. The motion
+is never silently set to zero.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 from dataclasses import dataclass, field
 
@@ -36,16 +43,19 @@ from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.preprocess import preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
-from odometry.se2 import between, compose, inverse
+from odometry.velocity import (
+    REDESKEW_MPS,
+    REDESKEW_RADPS,
+    Velocity,
+    bounded_twist,
+    close_twists,
+)
+from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
-NS_PER_S = 1e9
 FloatArray = NDArray[np.float64]
-TWIST_REFRESH_MPS = 0.25
-"""A new keyframe is re-rendered when its de-skew velocity is off by more than this [m/s]."""
-TWIST_REFRESH_RADPS = np.deg2rad(2.0)
-"""... or its yaw rate by more than this [rad/s]."""
 
 
 @dataclass(frozen=True)
@@ -88,47 +98,26 @@ class OdometryResult:
 
 @dataclass
 class _Keyframe:
-    """A registered scan: its pose at its reference time and the pose of its image frame
-    (`image_pose`, world frame; see `PreparedScan`), which the registrations chain."""
+    """A scan: its pose at its reference time and the pose of its image frame (`image_pose`,
+    world frame; see `PreparedScan`), which the registrations chain. A gap's (`gap`) poses are
+    the constant-velocity prediction."""
 
     index: int
     pose: FloatArray
     image_pose: FloatArray
     scan: PreparedScan
     frames: int = 0
+    gap: bool = False
     conversion_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
     """Covariance (own axes) that moving the image pose to the reference time adds to `pose`."""
-
-
-@dataclass(frozen=True)
-class _Velocity:
-    """The running body velocity: the twist (vx, vy [m/s], yaw rate [rad/s]) measured between
-    the last two image poses, at the middle of that interval (`time_ns`), and the trend of its
-    yaw rate [rad/s^2]."""
-
-    twist: FloatArray
-    time_ns: int
-    yaw_acceleration: float = 0.0
-
-    def at(self, time_ns: int, trend_gain: float) -> FloatArray:
-        """The twist expected at `time_ns`: constant, plus `trend_gain` times the yaw-rate trend
-        extrapolated linearly."""
-        twist = self.twist.copy()
-        twist[2] += trend_gain * self.yaw_acceleration * (time_ns - self.time_ns) / NS_PER_S
-        return twist
-
-    def updated(self, twist: FloatArray, time_ns: int) -> _Velocity:
-        """The velocity after measuring `twist` over an interval centred at `time_ns`."""
-        span_s = (time_ns - self.time_ns) / NS_PER_S
-        trend = (twist[2] - self.twist[2]) / span_s if span_s > 0 else 0.0
-        return _Velocity(twist=twist, time_ns=time_ns, yaw_acceleration=float(trend))
 
 
 @dataclass
 class _State:
     keyframe: _Keyframe | None = None
     previous: _Keyframe | None = None  # the previous scan (same fields as a keyframe)
-    velocity: _Velocity | None = None
+    last_registered: _Keyframe | None = None  # the last scan that was not a gap
+    velocity: Velocity | None = None
     results: list[OdometryResult] = field(default_factory=list)
 
 
@@ -169,6 +158,15 @@ class Odometry:
         return [r.index for r in self._state.results if r.gap]
 
     @property
+    def longest_gap_run(self) -> int:
+        """The most consecutive gaps so far (more than 2 on driven data is a defect)."""
+        best = run = 0
+        for result in self._state.results:
+            run = run + 1 if result.gap else 0
+            best = max(best, run)
+        return best
+
+    @property
     def keyframes(self) -> list[int]:
         """Indices of the scans that became keyframes."""
         return [r.index for r in self._state.results if r.is_keyframe]
@@ -179,7 +177,7 @@ class Odometry:
         state = self._state
         if state.velocity is None or state.previous is None:
             return None
-        return state.velocity.at(state.previous.scan.timestamp_ns, self._trend_gain)
+        return self._velocity_at(state.previous.scan.timestamp_ns)
 
     def reset(self) -> None:
         """Forget every scan (the next one starts again at `start_pose`)."""
@@ -192,53 +190,81 @@ class Odometry:
         Raises:
             OdometryError: the scan is malformed or not later than the previous one.
         """
-        state, cfg = self._state, self.config
+        state = self._state
         index = len(state.results)
+        scan = self._prepare(frame)
+        previous = state.previous
+        if state.keyframe is None or previous is None:
+            return self._start(index, scan)
+        dt_s = (scan.timestamp_ns - previous.scan.timestamp_ns) / NS_PER_S
+        if dt_s <= 0:
+            raise OdometryError(
+                f"scan {index} at {scan.timestamp_ns} ns is not later than the previous scan at "
+                f"{previous.scan.timestamp_ns} ns"
+            )
+        predicted = self._predicted_image_pose(previous, scan, dt_s)
+        reference, estimate = self._search(index, scan, predicted)
+        if reference is None:
+            return self._gap(index, scan, predicted, estimate)
+        return self._accept(index, scan, reference, estimate, dt_s)
+
+    # -- steps ---------------------------------------------------------------------------------
+    def _prepare(self, frame: Scan) -> PreparedScan:
+        """Condition a scan and render it, de-skewed with the running velocity."""
+        state, cfg = self._state, self.config
         polar = preprocess_polar(frame, cfg.preprocess)
         twist = None
         if state.velocity is not None and cfg.deskew.enabled:
-            twist = state.velocity.at(
-                polar.timestamp_ns + _ns(polar.mid_sweep_s or 0.0), self._trend_gain
-            )
-        scan = PreparedScan(polar, twist, cfg)
+            twist = self._velocity_at(polar.timestamp_ns + _ns(polar.mid_sweep_s or 0.0))
+        return PreparedScan(polar, twist, cfg)
 
-        if state.keyframe is None or state.previous is None:
-            start = self.start_pose.copy()
-            node = _Keyframe(index=index, pose=start, image_pose=start.copy(), scan=scan)
-            state.keyframe = state.previous = node
-            return self._record(
-                node,
-                motion=np.zeros(3),
-                covariance=np.zeros((3, 3)),
-                reference=node,
-                reference_motion=np.zeros(3),
-                is_keyframe=True,
-                ok=True,
-                quality=0.0,
-            )
+    def _start(self, index: int, scan: PreparedScan) -> OdometryResult:
+        """The first scan: placed at `start_pose`, the first keyframe."""
+        state = self._state
+        start = self.start_pose.copy()
+        node = _Keyframe(index=index, pose=start, image_pose=start.copy(), scan=scan)
+        state.keyframe = state.previous = state.last_registered = node
+        return self._record(
+            node,
+            motion=np.zeros(3),
+            covariance=np.zeros((3, 3)),
+            reference=node,
+            reference_motion=np.zeros(3),
+            is_keyframe=True,
+            ok=True,
+            quality=0.0,
+        )
 
-        previous = state.previous
-        dt_s = (int(frame.timestamp_ns) - previous.scan.timestamp_ns) / NS_PER_S
-        if dt_s <= 0:
-            raise OdometryError(
-                f"scan {index} at {frame.timestamp_ns} ns is not later than the previous scan at "
-                f"{previous.scan.timestamp_ns} ns"
-            )
-        predicted = None  # the image pose the constant-velocity model expects
-        if state.velocity is not None:
-            interval_s = _image_interval_s(previous, scan, dt_s)
-            twist = state.velocity.at(_image_time_ns(previous.scan), self._trend_gain)
-            predicted = compose(previous.image_pose, motion_from_twist(twist, interval_s))
+    def _predicted_image_pose(
+        self, previous: _Keyframe, scan: PreparedScan, dt_s: float
+    ) -> FloatArray | None:
+        """The image pose (world) the constant-velocity model expects for `scan` (None before
+        any velocity is known)."""
+        velocity = self._state.velocity
+        if velocity is None:
+            return None
+        twist = bounded_twist(velocity.twist, self.config)
+        return compose(
+            previous.image_pose, motion_from_twist(twist, _image_interval_s(previous, scan, dt_s))
+        )
 
-        keyframe = state.keyframe
-        references = [keyframe] if previous is keyframe else [keyframe, previous]
+    def _references(self) -> list[_Keyframe]:
+        """Scans to register against, in order: the keyframe, the last registered scan, the
+        previous scan (a gap's image is real, only its pose is predicted)."""
+        state = self._state
+        nodes = [state.keyframe, state.last_registered, state.previous]
+        return list({id(n): n for n in nodes if n is not None}.values())
+
+    def _search(
+        self, index: int, scan: PreparedScan, predicted: FloatArray | None
+    ) -> tuple[_Keyframe | None, MotionEstimate]:
+        """The first reference `scan` registers against and the estimate (None and the last
+        failed estimate when none does)."""
         estimate = None
-        for reference in references:
-            estimate = self._checked(
-                register_images(reference.scan, scan, cfg), reference, predicted
-            )
+        for reference in self._references():
+            estimate = self._registered(reference, scan, predicted)
             if estimate.ok:
-                break
+                return reference, estimate
             logger.info(
                 "scan %d: registration against scan %d failed (%s)",
                 index,
@@ -246,13 +272,67 @@ class Odometry:
                 estimate.reason,
             )
         assert estimate is not None
-        if not estimate.ok:
-            return self._gap(index, scan, dt_s, predicted, estimate)
+        return None, estimate
 
+    def _registered(
+        self, reference: _Keyframe, scan: PreparedScan, predicted: FloatArray | None
+    ) -> MotionEstimate:
+        """Register `scan`'s image against `reference`'s: globally, and when that fails or
+        disagrees with the prediction also seeded with the prediction; the stronger correlation
+        wins (see the module docstring)."""
+        cfg = self.config
+        estimate = register_images(reference.scan, scan, cfg)
+        if predicted is None:
+            return estimate
+        expected = between(reference.image_pose, predicted)
+        if estimate.ok and self._agrees(estimate.motion, expected):
+            return estimate
+        seeded = register_images(reference.scan, scan, cfg, hint=expected)
+        if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
+            logger.debug(
+                "scan against %d: seeded estimate %s (quality %.1f) beats %s (%.1f%s)",
+                reference.index,
+                np.round(seeded.motion, 3),
+                seeded.quality,
+                np.round(estimate.motion, 3),
+                estimate.quality,
+                "" if estimate.ok else f", {estimate.reason}",
+            )
+            return seeded
+        return estimate
+
+    def _agrees(self, motion: FloatArray, expected: FloatArray) -> bool:
+        """`motion` is within the prediction tolerances of `expected`."""
+        qcfg = self.config.quality
+        off = motion - expected
+        return bool(
+            np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m
+            and abs(wrap_angle(float(off[2]))) <= np.deg2rad(qcfg.max_prediction_error_deg)
+        )
+
+    def _accept(
+        self,
+        index: int,
+        scan: PreparedScan,
+        reference: _Keyframe,
+        estimate: MotionEstimate,
+        dt_s: float,
+    ) -> OdometryResult:
+        """Place `scan` by its registration against `reference` and update the velocity and the
+        keyframe."""
+        state = self._state
+        previous, keyframe = state.previous, state.keyframe
+        assert previous is not None and keyframe is not None
         if state.velocity is None:
             self._place_first_images(reference, scan, estimate.motion)
+        # A gap's pose is a guess: measure the velocity from a registered scan instead.
+        base = reference if previous.gap and reference is not previous else previous
+        interval_s = _image_interval_s(
+            base, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
+        )
+        scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
         image_pose = compose(reference.image_pose, estimate.motion)
-        change = self._update_velocity(previous, scan, image_pose, dt_s)
+        change = self._update_velocity(base, scan, image_pose, interval_s)
         pose = self._reference_pose(image_pose, scan)
         node = _Keyframe(
             index=index,
@@ -263,10 +343,9 @@ class Odometry:
                 estimate.covariance, change, scan, _image_interval_s(previous, scan, dt_s)
             ),
         )
-        motion = between(previous.pose, pose)
-        covariance = _rotate_covariance(
+        covariance = rotate_covariance(
             _factor_covariance(estimate.covariance, reference, node),
-            between(previous.pose, reference.pose),
+            float(between(previous.pose, reference.pose)[2]),
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
@@ -276,10 +355,10 @@ class Odometry:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
                 keyframe.scan = self._refreshed(keyframe.scan)
-        state.previous = node
+        state.previous = state.last_registered = node
         return self._record(
             node,
-            motion=motion,
+            motion=between(previous.pose, pose),
             covariance=covariance,
             reference=reference,
             reference_motion=between(reference.pose, pose),
@@ -288,29 +367,31 @@ class Odometry:
             quality=estimate.quality,
         )
 
-    # -- helpers ------------------------------------------------------------------------------
-    def _checked(
-        self, estimate: MotionEstimate, reference: _Keyframe, predicted: FloatArray | None
-    ) -> MotionEstimate:
-        """Reject an estimate far from the constant-velocity prediction (direction of travel).
-
-        `estimate` and `predicted` are image poses (see `_Keyframe`)."""
-        if not estimate.ok or predicted is None:
-            return estimate
-        qcfg = self.config.quality
-        expected = between(reference.image_pose, predicted)
-        off = estimate.motion - expected
-        off_yaw = abs(float(np.arctan2(np.sin(off[2]), np.cos(off[2]))))
-        if np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m and off_yaw <= np.deg2rad(
-            qcfg.max_prediction_error_deg
-        ):
-            return estimate
-        reason = (
-            f"motion {np.round(estimate.motion, 3)} is off the constant-velocity prediction "
-            f"{np.round(expected, 3)}"
+    def _redeskewed(
+        self,
+        reference: _Keyframe,
+        base: _Keyframe,
+        scan: PreparedScan,
+        estimate: MotionEstimate,
+        interval_s: float,
+    ) -> tuple[PreparedScan, MotionEstimate]:
+        """`scan` and its estimate, re-rendered and re-registered when the velocity it was
+        de-skewed with is far from the one its registration measures since `base` (a step of
+        the velocity: hard braking, a curvature step at a junction; a stale velocity bends the
+        image). The re-registration is seeded with the first estimate."""
+        if scan.twist is None or self._state.velocity is None or interval_s <= 0:
+            return scan, estimate
+        image_pose = compose(reference.image_pose, estimate.motion)
+        measured = bounded_twist(
+            twist_from_motion(between(base.image_pose, image_pose), interval_s), self.config
         )
-        return dataclasses.replace(estimate, ok=False, reason=reason)
+        if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
+            return scan, estimate
+        again = PreparedScan(scan.polar, measured, self.config)
+        redone = register_images(reference.scan, again, self.config, hint=estimate.motion)
+        return (again, redone) if redone.ok else (scan, estimate)
 
+    # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(
         self, reference: _Keyframe, scan: PreparedScan, image_motion: FloatArray
     ) -> None:
@@ -329,18 +410,21 @@ class Odometry:
     def _trend_gain(self) -> float:
         return self.config.deskew.yaw_rate_extrapolation
 
+    def _velocity_at(self, time_ns: int) -> FloatArray:
+        """The running twist expected at `time_ns`, within the plausible speed and yaw rate."""
+        assert self._state.velocity is not None
+        return bounded_twist(self._state.velocity.at(time_ns, self._trend_gain), self.config)
+
     def _update_velocity(
-        self, previous: _Keyframe, scan: PreparedScan, image_pose: FloatArray, dt_s: float
+        self, base: _Keyframe, scan: PreparedScan, image_pose: FloatArray, interval_s: float
     ) -> FloatArray:
-        """Measure the twist between the previous image pose and this scan's; returns its change
-        from the last measurement (zeros for the first)."""
+        """Measure the twist between `base`'s image pose and this scan's (`interval_s` apart);
+        returns its change from the last measurement (zeros for the first)."""
         state = self._state
-        twist = twist_from_motion(
-            between(previous.image_pose, image_pose), _image_interval_s(previous, scan, dt_s)
-        )
-        centre_ns = (_image_time_ns(previous.scan) + _image_time_ns(scan)) // 2
+        twist = twist_from_motion(between(base.image_pose, image_pose), interval_s)
+        centre_ns = (_image_time_ns(base.scan) + _image_time_ns(scan)) // 2
         if state.velocity is None:
-            state.velocity = _Velocity(twist=twist, time_ns=centre_ns)
+            state.velocity = Velocity(twist=twist, time_ns=centre_ns)
             return np.zeros(3)
         change = twist - state.velocity.twist
         state.velocity = state.velocity.updated(twist, centre_ns)
@@ -370,7 +454,7 @@ class Odometry:
         expected between the two times."""
         assert self._state.velocity is not None
         centre_ns = (_image_time_ns(scan) + scan.timestamp_ns) // 2
-        twist = self._state.velocity.at(centre_ns, self._trend_gain)
+        twist = self._velocity_at(centre_ns)
         return compose(image_pose, inverse(motion_from_twist(twist, scan.image_time_s)))
 
     def _needs_keyframe(self, estimate: MotionEstimate, keyframe: _Keyframe) -> bool:
@@ -387,12 +471,8 @@ class Odometry:
         velocity = self._state.velocity
         if velocity is None or not self.config.deskew.enabled or scan.polar.timing is None:
             return scan
-        new = velocity.at(_image_time_ns(scan), self._trend_gain)
-        used = scan.twist
-        if used is not None and (
-            np.hypot(*(new[:2] - used[:2])) <= TWIST_REFRESH_MPS
-            and abs(new[2] - used[2]) <= TWIST_REFRESH_RADPS
-        ):
+        new = self._velocity_at(_image_time_ns(scan))
+        if scan.twist is not None and close_twists(new, scan.twist):
             return scan
         return PreparedScan(scan.polar, new, self.config)
 
@@ -400,7 +480,6 @@ class Odometry:
         self,
         index: int,
         scan: PreparedScan,
-        dt_s: float,
         predicted: FloatArray | None,
         failed: MotionEstimate,
     ) -> OdometryResult:
@@ -419,7 +498,7 @@ class Odometry:
         motion = between(previous.pose, pose)
         sigma_yaw = np.deg2rad(qcfg.gap_sigma_yaw_deg)
         covariance = np.diag([qcfg.gap_sigma_xy_m**2, qcfg.gap_sigma_xy_m**2, sigma_yaw**2])
-        node = _Keyframe(index=index, pose=pose, image_pose=image_pose, scan=scan)
+        node = _Keyframe(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
         state.previous = node  # the keyframe stays: the next scan tries it first
         keyframe = state.keyframe
         assert keyframe is not None
@@ -489,15 +568,11 @@ def _factor_covariance(
     """Covariance (reference axes) of `node`'s pose in `reference`'s frame: the registration of
     the image frames (reference image axes) plus both conversions to reference times."""
     return (
-        _rotate_covariance(registration_covariance, between(reference.pose, reference.image_pose))
+        rotate_covariance(
+            registration_covariance, float(between(reference.pose, reference.image_pose)[2])
+        )
         + reference.conversion_covariance
-        + _rotate_covariance(node.conversion_covariance, between(reference.pose, node.pose))
+        + rotate_covariance(
+            node.conversion_covariance, float(between(reference.pose, node.pose)[2])
+        )
     )
-
-
-def _rotate_covariance(covariance: FloatArray, frame_in_target: FloatArray) -> FloatArray:
-    """A covariance (3, 3) whose translation is in one frame, expressed in the axes of a target
-    frame in which that frame has pose `frame_in_target` (3,)."""
-    c, s = np.cos(frame_in_target[2]), np.sin(frame_in_target[2])
-    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return rot @ covariance @ rot.T

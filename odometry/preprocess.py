@@ -26,10 +26,10 @@ from odometry import OdometryError
 from odometry.config import LevelConfig, PreprocessConfig
 from odometry.deskew import sampling_maps
 from odometry.scan import Scan
+from raplace.units import NS_PER_S
 from raplace.warp import CartesianGrid, remap
 
 TWO_PI = 2.0 * np.pi
-NS_PER_S = 1e9
 UNIFORM_SWEEP_TOLERANCE = 0.05
 """Rows are resampled when an azimuth deviates from the fitted uniform sweep by more than this
 fraction of the azimuth step."""

@@ -57,11 +57,11 @@ from odometry.rotation import (
     signature,
 )
 from odometry.scan import Scan
-from odometry.se2 import compose, inverse, wrap_angle
+from raplace.se2 import compose, inverse, rotate_covariance, wrap_angle
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
-NS_PER_S = 1e9
 FloatArray = NDArray[np.float64]
 
 
@@ -232,34 +232,30 @@ def image_to_reference(
     return compose(compose(ref.image_pose, image_motion), inverse(cur.image_pose))
 
 
-def rotate_covariance(covariance: FloatArray, yaw_rad: float) -> FloatArray:
-    """A (3, 3) covariance whose translation is in a frame turned by `yaw_rad` relative to the
-    one wanted, expressed in the wanted frame (x, y, yaw order)."""
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return rot @ covariance @ rot.T
-
-
-def register_images(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> MotionEstimate:
+def register_images(
+    ref: PreparedScan,
+    cur: PreparedScan,
+    cfg: OdometryConfig,
+    hint: FloatArray | None = None,
+) -> MotionEstimate:
     """Pose of `cur`'s image frame in `ref`'s image frame (see `PreparedScan`); the covariance's
-    translation is in `ref`'s image frame."""
-    coarse_level = cartesian_level(cfg.coarse)
-    tcfg = cfg.translation
-    rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, cfg.rotation)
+    translation is in `ref`'s image frame.
 
-    # Coarse translation for both half-turn hypotheses.
-    image = cur._render(coarse_level, rotation.angle_rad)
-    spectrum = forward(image)
-    shape = image.shape
-    hypotheses = []
-    for turn in (0.0, np.pi):
-        candidate = spectrum if turn == 0.0 else _half_turn_ramp(shape[0]) * np.conj(spectrum)
-        surface = correlate(
-            ref.coarse_spectrum, candidate, shape, tcfg.smoothing_px, tcfg.whitening
-        )
-        hypotheses.append((locate_peak(surface, tcfg.smoothing_px), turn))
-    coarse_peak, turn = max(hypotheses, key=lambda h: h[0].quality)
-    yaw = float(wrap_angle(rotation.angle_rad + turn))
+    Without `hint` the search is global: rotation over the full circle (Fourier-Mellin modulo
+    pi, the half turn resolved by the stronger translation peak), translation anywhere in the
+    coarse image. With `hint` (3,) (dx, dy [m], dyaw [rad], e.g. a motion model's prediction)
+    the registration is seeded with it: the rotation starts from the hint's yaw and the coarse
+    translation peak is searched within `cfg.translation.hint_radius_m` of the hint's
+    translation; the refinements that follow are the same. The caller compares the two by their
+    peak quality (a hint narrows the search, it never overrules the images).
+    """
+    coarse_level = cartesian_level(cfg.coarse)
+    if hint is None:
+        rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, cfg.rotation)
+        coarse_peak, yaw = _coarse_translation(ref, cur, rotation.angle_rad, cfg, None)
+    else:
+        rotation = RotationEstimate(angle_rad=float(hint[2]), sigma_rad=0.0, quality=np.inf)
+        coarse_peak, yaw = _coarse_translation(ref, cur, float(hint[2]), cfg, hint[:2])
     t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
     coarse_motion = np.array([t_coarse[0], t_coarse[1], yaw])
     if cfg.rotation.refine:
@@ -268,53 +264,119 @@ def register_images(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -
         rotation = residual
 
     peak, cell = coarse_peak, coarse_level.cell_m
-    if tcfg.use_fine:
-        fine_level = cartesian_level(cfg.fine)
-        fine = cur._render(fine_level, yaw)
-        centre = t_coarse / fine_level.cell_m
-        surface = correlate(
-            ref.fine_spectrum, forward(fine), fine.shape, tcfg.smoothing_px, tcfg.whitening
-        )
-        peak = locate_peak(
-            surface, tcfg.smoothing_px, (float(centre[0]), float(centre[1])), tcfg.fine_search_px
-        )
-        cell = fine_level.cell_m
+    if cfg.translation.use_fine:
+        peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
     translation = _peak_to_metres(peak, cell)
     motion = np.array([translation[0], translation[1], yaw])
-
-    qcfg = cfg.quality
-    cov = np.zeros((3, 3))
-    cov[:2, :2] = peak.covariance_px() * cell**2 * qcfg.sigma_scale**2
-    cov[:2, :2] += np.eye(2) * qcfg.min_sigma_xy_m**2
-    cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(
-        qcfg.min_sigma_yaw_deg
-    ) ** 2
-
-    reason = ""
     dt_s = (cur.timestamp_ns - ref.timestamp_ns) / NS_PER_S
-    if ref.empty or cur.empty:
-        reason = "a scan is empty after conditioning"
-    elif rotation.quality < qcfg.min_peak_quality:
-        reason = f"weak rotation peak (quality {rotation.quality:.1f})"
-    elif min(peak.quality, coarse_peak.quality) < qcfg.min_peak_quality:
-        reason = f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
-    elif np.hypot(*(translation - t_coarse)) > qcfg.max_coarse_fine_disagreement_m:
-        reason = f"coarse and fine translations disagree ({t_coarse} vs {translation})"
-    elif dt_s > 0 and np.hypot(*translation) / dt_s > qcfg.max_speed_mps:
-        reason = f"implausible speed {np.hypot(*translation) / dt_s:.1f} m/s"
-    elif dt_s > 0 and np.rad2deg(abs(yaw)) / dt_s > qcfg.max_yaw_rate_dps:
-        reason = f"implausible yaw rate {np.rad2deg(abs(yaw)) / dt_s:.1f} deg/s"
+    reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, dt_s, cfg)
     if reason:
         logger.debug("registration failed: %s (motion %s)", reason, motion)
     return MotionEstimate(
         motion=motion,
-        covariance=cov,
+        covariance=_covariance(peak, cell, rotation, cfg),
         quality=float(peak.quality),
         rotation_quality=rotation.quality,
         ok=not reason,
         reason=reason,
         coarse_motion=coarse_motion,
     )
+
+
+def _coarse_translation(
+    ref: PreparedScan,
+    cur: PreparedScan,
+    angle_rad: float,
+    cfg: OdometryConfig,
+    hint_xy: FloatArray | None,
+) -> tuple[Peak, float]:
+    """Coarse translation peak and yaw [rad] with `cur` rendered turned by `angle_rad`.
+
+    Without `hint_xy` both half-turn hypotheses are correlated and the stronger peak wins (the
+    Fourier-Mellin rotation is known modulo pi); with `hint_xy` (2,) [m] only `angle_rad` is
+    tried and the peak is searched within `hint_radius_m` of that translation."""
+    level = cartesian_level(cfg.coarse)
+    tcfg = cfg.translation
+    image = cur._render(level, angle_rad)
+    spectrum = forward(image)
+    shape = image.shape
+    turns = (0.0, np.pi) if hint_xy is None else (0.0,)
+    centre = (
+        None
+        if hint_xy is None
+        else (float(hint_xy[0]) / level.cell_m, float(hint_xy[1]) / level.cell_m)
+    )
+    radius = None if hint_xy is None else tcfg.hint_radius_m / level.cell_m
+    hypotheses = []
+    for turn in turns:
+        candidate = spectrum if turn == 0.0 else _half_turn_ramp(shape[0]) * np.conj(spectrum)
+        surface = correlate(
+            ref.coarse_spectrum, candidate, shape, tcfg.smoothing_px, tcfg.whitening
+        )
+        hypotheses.append((locate_peak(surface, tcfg.smoothing_px, centre, radius), turn))
+    peak, turn = max(hypotheses, key=lambda h: h[0].quality)
+    return peak, float(wrap_angle(angle_rad + turn))
+
+
+def _fine_translation(
+    ref: PreparedScan, cur: PreparedScan, t_coarse: FloatArray, yaw: float, cfg: OdometryConfig
+) -> tuple[Peak, float]:
+    """The fine level's translation peak near the coarse estimate, and the fine cell [m]."""
+    tcfg = cfg.translation
+    level = cartesian_level(cfg.fine)
+    fine = cur._render(level, yaw)
+    centre = t_coarse / level.cell_m
+    surface = correlate(
+        ref.fine_spectrum, forward(fine), fine.shape, tcfg.smoothing_px, tcfg.whitening
+    )
+    peak = locate_peak(
+        surface, tcfg.smoothing_px, (float(centre[0]), float(centre[1])), tcfg.fine_search_px
+    )
+    return peak, level.cell_m
+
+
+def _covariance(
+    peak: Peak, cell_m: float, rotation: RotationEstimate, cfg: OdometryConfig
+) -> FloatArray:
+    """(3, 3) covariance of a registration from its translation and rotation peaks."""
+    qcfg = cfg.quality
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = peak.covariance_px() * cell_m**2 * qcfg.sigma_scale**2
+    cov[:2, :2] += np.eye(2) * qcfg.min_sigma_xy_m**2
+    cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(
+        qcfg.min_sigma_yaw_deg
+    ) ** 2
+    return cov
+
+
+def _failure_reason(
+    ref: PreparedScan,
+    cur: PreparedScan,
+    rotation: RotationEstimate,
+    coarse_peak: Peak,
+    peak: Peak,
+    t_coarse: FloatArray,
+    motion: FloatArray,
+    dt_s: float,
+    cfg: OdometryConfig,
+) -> str:
+    """Why a registration is not to be trusted ("" when every check passes): empty scans, weak
+    peaks, coarse/fine disagreement, or a motion faster than the vehicle can move in `dt_s`."""
+    qcfg = cfg.quality
+    distance = float(np.hypot(motion[0], motion[1]))
+    if ref.empty or cur.empty:
+        return "a scan is empty after conditioning"
+    if rotation.quality < qcfg.min_peak_quality:
+        return f"weak rotation peak (quality {rotation.quality:.1f})"
+    if min(peak.quality, coarse_peak.quality) < qcfg.min_peak_quality:
+        return f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
+    if np.hypot(*(motion[:2] - t_coarse)) > qcfg.max_coarse_fine_disagreement_m:
+        return f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
+    if dt_s > 0 and distance / dt_s > qcfg.max_speed_mps:
+        return f"implausible speed {distance / dt_s:.1f} m/s"
+    if dt_s > 0 and np.rad2deg(abs(motion[2])) / dt_s > qcfg.max_yaw_rate_dps:
+        return f"implausible yaw rate {np.rad2deg(abs(motion[2])) / dt_s:.1f} deg/s"
+    return ""
 
 
 def estimate_motion(

@@ -1,11 +1,14 @@
-"""The radar scan the odometry consumes, as a structural protocol.
+"""The radar scan every stage consumes: the `Scan` protocol and `RadarFrame`, its record.
 
-`radar_slam.datasets.frame.RadarFrame` satisfies it without the odometry importing radar_slam;
-any object with these attributes does (tests build small dataclasses).
+`Scan` is structural: any object with these attributes is a scan (tests build small dataclasses;
+the dataset loaders return `RadarFrame`s). Conventions: azimuths counter-clockwise from +x
+(forward) in the sensor frame x-forward, y-left; bin k of row i lies at range
+(k + 0.5) * range_resolution_m along azimuths_rad[i]; times are integer nanoseconds.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -47,3 +50,27 @@ class Scan(Protocol):
 
     @property
     def azimuth_times_ns(self) -> NDArray[np.int64] | None: ...
+
+
+@dataclass(frozen=True)
+class RadarFrame:
+    """One radar sweep: the concrete `Scan` (see `Scan` for the attributes)."""
+
+    timestamp_ns: int
+    polar: NDArray[np.uint8]
+    azimuths_rad: NDArray[np.float64]
+    range_resolution_m: float
+    sensor: str
+    azimuth_times_ns: NDArray[np.int64] | None = None
+
+    @property
+    def n_azimuths(self) -> int:
+        return int(self.polar.shape[0])
+
+    @property
+    def n_bins(self) -> int:
+        return int(self.polar.shape[1])
+
+    @property
+    def max_range_m(self) -> float:
+        return self.n_bins * self.range_resolution_m

@@ -11,10 +11,12 @@ import logging
 import sys
 
 import typer
+from typer._click.exceptions import ClickException, NoArgsIsHelpError, UsageError
 
 from odometry import OdometryError
 from radar_slam import __version__
 from radar_slam.errors import RadarSlamError
+from radar_slam.viewer import viewer_argv
 from raplace import RaPlaceError
 
 COMMAND_MODULES = (
@@ -24,8 +26,9 @@ COMMAND_MODULES = (
     "placerec",
     "run",
     "loops",
-    "maps",
-)  # maps: issue-13
+    "export",
+    "maps",  # issue-13
+)
 
 app = typer.Typer(
     name="radar-slam",
@@ -62,18 +65,39 @@ for _name in COMMAND_MODULES:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit code.
 
-    Typer's standalone mode prints usage errors itself (exit code 2); user errors raised by the
-    commands become one line on stderr and exit code 1; anything else is a bug and keeps its
-    traceback.
+    User errors, a bad option value included, become one line on stderr and exit code 1;
+    Ctrl-C exits with code 130; anything else is a bug and keeps its traceback.
     """
+    arguments = viewer_argv(sys.argv[1:] if argv is None else argv)  # issue-14: bare --viewer
     try:
-        app(args=argv, standalone_mode=True)
+        code = app(args=arguments, standalone_mode=False)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except NoArgsIsHelpError as exc:
+        exc.show()
+        return exc.exit_code
+    except UsageError as exc:  # a bad option or argument: one line too (issue 12)
+        command = exc.ctx.command_path if exc.ctx is not None else "radar-slam"
+        typer.echo(f"radar-slam: error: {command}: {_one_line(exc.format_message())}", err=True)
+        return 1
+    except ClickException as exc:
+        typer.echo(f"radar-slam: error: {_one_line(exc.format_message())}", err=True)
+        return 1
+    except typer.Abort:
+        typer.echo("radar-slam: interrupted", err=True)
+        return INTERRUPTED_EXIT_CODE
     except (RadarSlamError, RaPlaceError, OdometryError) as exc:
         typer.echo(f"radar-slam: error: {exc}", err=True)
         return 1
-    return 0
+    return code if isinstance(code, int) else 0
+
+
+INTERRUPTED_EXIT_CODE = 130
+"""Exit code after Ctrl-C (128 + SIGINT), as shells report it."""
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from radar_slam.errors import GraphError, GraphFormatError
 from radar_slam.graph import POSE_DIM, GraphConfig, PoseGraph
+from radar_slam.results import write_text_atomically
 
 log = logging.getLogger(__name__)
 
@@ -248,10 +249,10 @@ def format_g2o(graph: G2oGraph) -> str:
 
 
 def write_g2o(path: Path | str, graph: G2oGraph) -> None:
-    """Write `graph` as a g2o file (see `format_g2o`)."""
+    """Write `graph` as a g2o file (see `format_g2o`), atomically (temporary file renamed)."""
     path = Path(path)
     try:
-        path.write_text(format_g2o(graph))
+        write_text_atomically(path, format_g2o(graph))
     except OSError as exc:
         raise GraphError(f"{path}: cannot write g2o file ({exc.strerror})") from None
 

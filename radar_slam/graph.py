@@ -3,7 +3,7 @@
 Conventions (the whole project's):
 - A pose is a (3,) float array `(x [m], y [m], yaw [rad])`, T_world_keyframe.
 - A relative measurement between keyframes i and j is the pose of j in the frame of i,
-  `T_i^-1 T_j` (`odometry.se2.between(T_i, T_j)`), exactly what `gtsam.BetweenFactorPose2(i, j)`
+  `T_i^-1 T_j` (`raplace.se2.between(T_i, T_j)`), exactly what `gtsam.BetweenFactorPose2(i, j)`
   expects.
 - A covariance is (3, 3) in GTSAM's Pose2 tangent space, order `(x [m], y [m], yaw [rad])`,
   expressed in the frame of the measurement itself (right perturbation: `z * Exp(delta)`). It
@@ -18,43 +18,49 @@ Loop factors carry the robust kernel of `GraphConfig.loop_kernel`; odometry and 
 Gaussian. `update()` feeds ISAM2 only what is new since the last call; `optimize_final()` is a batch
 Levenberg-Marquardt or GNC (odometry and priors as known inliers) over the whole graph.
 
-Pure math: no files, no printing (g2o I/O lives in `radar_slam.g2o`).
+Pure math: no files, no printing (g2o I/O lives in `radar_slam.g2o`; noise models, validation and
+`add_loop_factors` for a user's own GTSAM graph in `radar_slam.factors`).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import se2
-from radar_slam.errors import ConfigError, GraphError
+from radar_slam.errors import GraphError
+from radar_slam.factors import (
+    DEFAULT_LOOP_KERNEL_WIDTH,
+    POSE_DIM,
+    LoopKernel,
+    add_loop_factors,
+    as_covariance,
+    as_pose,
+    gaussian_noise,
+    loop_noise,
+    m_estimator,
+    pose2,
+    relative_pose_covariance,
+)
+from radar_slam.loops.records import LoopConstraint
+from raplace import checks, se2
 
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 
-LoopKernel = Literal["cauchy", "huber", "none"]
 FinalPass = Literal["lm", "gnc", "none"]
 GncLoss = Literal["tls", "gm"]
 ConstraintKind = Literal["odometry", "loop"]
 
-POSE_DIM = 3
-"""Dimension of an SE(2) pose and of its tangent space (x, y, yaw)."""
 
 DEFAULT_PRIOR_SIGMAS: tuple[float, float, float] = (1e-3, 1e-3, 1e-4)
 """Standard deviations (x [m], y [m], yaw [rad]) of the prior anchoring the first keyframe."""
-
-DEFAULT_LOOP_KERNEL_WIDTH = 3.0
-"""Robust-kernel parameter k in whitened units (Mahalanobis distance, i.e. standard deviations).
-Cauchy: weight 1 / (1 + (r / k)^2); Huber: weight 1 for r <= k, k / r beyond. k = 1 made ISAM2
-all but ignore the first loops of a strongly drifting trajectory (their residual is then hundreds
-of sigmas); k = 3 keeps them while still discounting gross outliers (tests/test_graph.py)."""
 
 DEFAULT_ISAM2_RELINEARIZE_THRESHOLD = 0.01
 """ISAM2 relinearises a variable whose tangent-space update exceeds this (m / rad)."""
@@ -75,9 +81,6 @@ DEFAULT_GNC_INLIER_PROBABILITY = 0.9999
 at this probability (3 degrees of freedom: 21.1, i.e. 4.6 sigma) is treated as an outlier. 0.99
 (11.3) made GNC reject true loops when the odometry covariance understates a strong drift
 (tests/test_graph.py, "strong" scenario)."""
-
-SYMMETRY_TOLERANCE = 1e-9
-"""Largest relative asymmetry |C - C^T| / max|C| accepted in a covariance matrix."""
 
 
 @dataclass(frozen=True)
@@ -114,56 +117,20 @@ class GraphConfig:
     gnc_inlier_probability: float = DEFAULT_GNC_INLIER_PROBABILITY
 
     def __post_init__(self) -> None:
-        if len(self.prior_sigmas) != POSE_DIM or not all(
-            np.isfinite(s) and s > 0 for s in self.prior_sigmas
-        ):
-            raise ConfigError(
-                f"graph.prior_sigmas: need 3 positive numbers, got {self.prior_sigmas}"
-            )
-        if self.loop_kernel not in ("cauchy", "huber", "none"):
-            raise ConfigError(f"graph.loop_kernel: {self.loop_kernel!r} is not cauchy|huber|none")
-        if self.final_pass not in ("lm", "gnc", "none"):
-            raise ConfigError(f"graph.final_pass: {self.final_pass!r} is not lm|gnc|none")
-        if self.gnc_loss not in ("tls", "gm"):
-            raise ConfigError(f"graph.gnc_loss: {self.gnc_loss!r} is not tls|gm")
-        if not (
-            np.isfinite(self.isam2_relinearize_threshold) and self.isam2_relinearize_threshold >= 0
-        ):
-            raise ConfigError(
-                "graph.isam2_relinearize_threshold: must be >= 0, "
-                f"got {self.isam2_relinearize_threshold}"
-            )
-        positive = {
-            "loop_kernel_width": self.loop_kernel_width,
-            "isam2_relinearize_skip": self.isam2_relinearize_skip,
-            "isam2_iterations": self.isam2_iterations,
-            "lm_max_iterations": self.lm_max_iterations,
-            "lm_relative_error_tol": self.lm_relative_error_tol,
-        }
-        for name, value in positive.items():
-            if not (np.isfinite(value) and value > 0):
-                raise ConfigError(f"graph.{name}: must be positive, got {getattr(self, name)}")
-        if not 0.0 < self.gnc_inlier_probability < 1.0:
-            raise ConfigError(
-                "graph.gnc_inlier_probability: must be in (0, 1), "
-                f"got {self.gnc_inlier_probability}"
-            )
-
-
-class LoopConstraint(NamedTuple):
-    """A verified loop: the pose of keyframe j in the frame of keyframe i, with its covariance.
-
-    Attributes:
-        i: key of the reference (usually the query) keyframe.
-        j: key of the other keyframe.
-        measurement: (3,) T_i^-1 T_j `(x [m], y [m], yaw [rad])`.
-        covariance: (3, 3) of the measurement, tangent order (x, y, yaw), frame of the measurement.
-    """
-
-    i: int
-    j: int
-    measurement: ArrayLike
-    covariance: ArrayLike
+        if len(self.prior_sigmas) != POSE_DIM:
+            raise ValueError(f"prior_sigmas: need 3 positive numbers, got {self.prior_sigmas}")
+        for sigma in self.prior_sigmas:
+            checks.positive("prior_sigmas", sigma)
+        checks.one_of("loop_kernel", self.loop_kernel, ("cauchy", "huber", "none"))
+        checks.one_of("final_pass", self.final_pass, ("lm", "gnc", "none"))
+        checks.one_of("gnc_loss", self.gnc_loss, ("tls", "gm"))
+        checks.non_negative("isam2_relinearize_threshold", self.isam2_relinearize_threshold)
+        checks.positive("loop_kernel_width", self.loop_kernel_width)
+        checks.at_least("isam2_relinearize_skip", self.isam2_relinearize_skip, 1)
+        checks.at_least("isam2_iterations", self.isam2_iterations, 1)
+        checks.at_least("lm_max_iterations", self.lm_max_iterations, 1)
+        checks.positive("lm_relative_error_tol", self.lm_relative_error_tol)
+        checks.in_range("gnc_inlier_probability", self.gnc_inlier_probability, 0.0, 1.0, True, True)
 
 
 @dataclass(frozen=True)
@@ -193,135 +160,18 @@ class Prior:
     covariance: FloatArray
 
 
-# --------------------------------------------------------------------------- validation / models
-
-
-def as_pose(value: ArrayLike, what: str) -> FloatArray:
-    """Return `value` as a finite (3,) float64 pose; GraphError naming `what` otherwise."""
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (POSE_DIM,):
-        raise GraphError(f"{what}: expected shape (3,), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise GraphError(f"{what}: not finite: {arr}")
-    return arr.copy()
-
-
-def as_covariance(value: ArrayLike, what: str) -> FloatArray:
-    """Return `value` as a symmetric positive definite (3, 3) covariance; GraphError otherwise.
-
-    A matrix symmetric to `SYMMETRY_TOLERANCE` (relative) is symmetrised exactly.
-    """
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (POSE_DIM, POSE_DIM):
-        raise GraphError(f"{what}: expected a (3, 3) matrix, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise GraphError(f"{what}: not finite")
-    scale = float(np.max(np.abs(arr)))
-    if scale == 0.0 or np.max(np.abs(arr - arr.T)) > SYMMETRY_TOLERANCE * scale:
-        raise GraphError(f"{what}: not a symmetric positive definite matrix:\n{arr}")
-    arr = 0.5 * (arr + arr.T)
-    try:
-        np.linalg.cholesky(arr)
-    except np.linalg.LinAlgError:
-        raise GraphError(f"{what}: not positive definite:\n{arr}") from None
-    return arr
-
-
 def _key(value: int, what: str) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
         raise GraphError(f"{what}: a keyframe key is a non-negative integer, got {value!r}")
     return int(value)
 
 
-def gaussian_noise(covariance: ArrayLike) -> gtsam.noiseModel.Base:
-    """A GTSAM Gaussian noise model of a (3, 3) SPD covariance (validated)."""
-    return gtsam.noiseModel.Gaussian.Covariance(as_covariance(covariance, "covariance"))
-
-
-def loop_noise(
-    covariance: ArrayLike,
-    kernel: LoopKernel = "cauchy",
-    kernel_width: float = DEFAULT_LOOP_KERNEL_WIDTH,
-) -> gtsam.noiseModel.Base:
-    """The noise model of a loop factor: Gaussian(covariance) under a robust kernel.
-
-    Args:
-        covariance: (3, 3) SPD covariance of the loop measurement.
-        kernel: "cauchy", "huber" or "none" (plain Gaussian).
-        kernel_width: kernel parameter k in standard deviations (whitened units).
-    """
-    base = gaussian_noise(covariance)
-    estimator = _m_estimator(kernel, kernel_width)
-    return base if estimator is None else gtsam.noiseModel.Robust.Create(estimator, base)
-
-
-def _m_estimator(
-    kernel: str, width: float
-) -> gtsam.noiseModel.mEstimator.Cauchy | gtsam.noiseModel.mEstimator.Huber | None:
-    if kernel == "cauchy":
-        return gtsam.noiseModel.mEstimator.Cauchy.Create(width)
-    if kernel == "huber":
-        return gtsam.noiseModel.mEstimator.Huber.Create(width)
-    if kernel == "none":
-        return None
-    raise GraphError(f"unknown robust kernel {kernel!r} (cauchy|huber|none)")
-
-
-def _pose2(pose: FloatArray) -> gtsam.Pose2:
-    return gtsam.Pose2(float(pose[0]), float(pose[1]), float(pose[2]))
-
-
 def _between_factor(c: Constraint, noise: gtsam.noiseModel.Base) -> gtsam.BetweenFactorPose2:
-    return gtsam.BetweenFactorPose2(c.i, c.j, _pose2(c.measurement), noise)
+    return gtsam.BetweenFactorPose2(c.i, c.j, pose2(c.measurement), noise)
 
 
 def _prior_factor(p: Prior) -> gtsam.PriorFactorPose2:
-    return gtsam.PriorFactorPose2(p.key, _pose2(p.pose), gaussian_noise(p.covariance))
-
-
-def add_loop_factors(
-    graph: gtsam.NonlinearFactorGraph,
-    loops: Iterable[LoopConstraint | tuple[int, int, ArrayLike, ArrayLike]],
-    kernel: LoopKernel = "cauchy",
-    kernel_width: float = DEFAULT_LOOP_KERNEL_WIDTH,
-    key: Callable[[int], int] | None = None,
-) -> list[int]:
-    """Add verified loop constraints to a user's own GTSAM graph as robust between-factors.
-
-    Args:
-        graph: the user's `gtsam.NonlinearFactorGraph` (modified in place).
-        loops: (i, j, measurement (3,), covariance (3, 3)) items, e.g. `LoopConstraint`s;
-            measurement = pose of j in the frame of i.
-        kernel: robust kernel "cauchy", "huber" or "none".
-        kernel_width: kernel parameter in standard deviations.
-        key: maps a keyframe index to the user's GTSAM key (e.g. `gtsam.symbol_shorthand.X`);
-            identity by default.
-
-    Returns:
-        The indices of the added factors in `graph` (e.g. to leave them out of GNC known inliers).
-    """
-    to_key = key if key is not None else (lambda k: k)
-    added: list[int] = []
-    for n, (i, j, measurement, covariance) in enumerate(loops):
-        z = as_pose(measurement, f"loop {n} ({i} -> {j}) measurement")
-        noise = loop_noise(as_covariance(covariance, f"loop {n} covariance"), kernel, kernel_width)
-        added.append(graph.size())
-        graph.add(gtsam.BetweenFactorPose2(to_key(i), to_key(j), _pose2(z), noise))
-    return added
-
-
-def relative_pose_covariance(
-    pose_i: ArrayLike, pose_j: ArrayLike, joint_covariance: ArrayLike
-) -> FloatArray:
-    """First-order covariance (3, 3) of T_i^-1 T_j given the (6, 6) joint covariance of (i, j).
-
-    The joint covariance is GTSAM's (blocks i then j, each in its own body frame); the result is in
-    the frame of the relative pose. Jacobians of `between`: d/di = -Ad((T_i^-1 T_j)^-1), d/dj = I.
-    """
-    rel = _pose2(se2.between(pose_i, pose_j))
-    h = np.hstack([-rel.inverse().AdjointMap(), np.eye(POSE_DIM)])
-    cov = h @ np.asarray(joint_covariance, dtype=np.float64) @ h.T
-    return 0.5 * (cov + cov.T)
+    return gtsam.PriorFactorPose2(p.key, pose2(p.pose), gaussian_noise(p.covariance))
 
 
 # --------------------------------------------------------------------------- the graph
@@ -349,9 +199,8 @@ class PoseGraph:
             graph.add_keyframe(k, graph.predict(k - 1, odom))
             graph.add_odometry(k - 1, k, odom, odom_cov)
             graph.update()                    # k is now in ISAM2: marginals available
-            for m, z, z_cov in verified_loops(k):
-                if graph.mahalanobis(k, m, z, z_cov) < gate:
-                    graph.add_loop(k, m, z, z_cov)
+            for m, z, z_cov in verified_loops(k):   # e.g. from radar_slam.loops.LoopDetector
+                graph.add_loop(k, m, z, z_cov)
             graph.update()                    # no-op step when no loop was added
         poses = graph.optimize_final()        # (N, 3), key order
 
@@ -516,7 +365,7 @@ class PoseGraph:
             - self._solver.keys
         )
         for key in new_keys:
-            values.insert(key, _pose2(self._initial[key]))
+            values.insert(key, pose2(self._initial[key]))
         if factors.size() == 0 and not self._pending_removals and not self._solver.keys:
             return
         isam = self._solver.isam
@@ -566,7 +415,7 @@ class PoseGraph:
         current = dict(zip(self.keys(), self.estimates(), strict=True))
         initial = gtsam.Values()
         for key in sorted(keys_used):
-            initial.insert(key, _pose2(current[key]))
+            initial.insert(key, pose2(current[key]))
         lm = gtsam.LevenbergMarquardtParams()
         lm.setMaxIterations(cfg.lm_max_iterations)
         lm.setRelativeErrorTol(cfg.lm_relative_error_tol)
@@ -614,10 +463,10 @@ class PoseGraph:
 
     def _kernel_weight(self, n: int, values: gtsam.Values) -> float:
         c = self._constraints[n]
-        z = _pose2(c.measurement)
+        z = pose2(c.measurement)
         error = gtsam.Pose2.Logmap(z.between(values.atPose2(c.i).between(values.atPose2(c.j))))
         distance = float(np.sqrt(error @ np.linalg.solve(c.covariance, error)))
-        estimator = _m_estimator(self.config.loop_kernel, self.config.loop_kernel_width)
+        estimator = m_estimator(self.config.loop_kernel, self.config.loop_kernel_width)
         return 1.0 if estimator is None else float(estimator.weight(distance))
 
     # ----------------------------------------------------------------- queries
@@ -711,31 +560,24 @@ class PoseGraph:
         full = np.block([[joint.at(i, i), joint.at(i, j)], [joint.at(j, i), joint.at(j, j)]])
         return relative_pose_covariance(self._solver_pose(i), self._solver_pose(j), full)
 
-    def mahalanobis(self, i: int, j: int, measurement: ArrayLike, covariance: ArrayLike) -> float:
-        """Squared Mahalanobis distance of a proposed loop against the ISAM2 estimate.
-
-        With zhat = T_i^-1 T_j (estimate) and z = `measurement` (3,) of covariance `covariance`
-        (3, 3), the residual is e = Log(z^-1 zhat) (GTSAM's between-factor error) and
-
-            d2 = e^T (S_rel + A S_z A^T)^-1 e,   A = Ad(zhat^-1 z),
-
-        S_rel = `relative_covariance(i, j)`. First order (the Jacobian of Log is taken as I).
-        Compare with a chi-square quantile at 3 dof (e.g. 11.34 at 99 %).
-        """
-        z = _pose2(as_pose(measurement, "mahalanobis measurement"))
-        s_z = as_covariance(covariance, "mahalanobis covariance")
-        s_rel = self.relative_covariance(i, j)
-        zhat = _pose2(se2.between(self._solver_pose(i), self._solver_pose(j)))
-        error = gtsam.Pose2.Logmap(z.between(zhat))
-        a = zhat.between(z).AdjointMap()
-        s = s_rel + a @ s_z @ a.T
-        return float(error @ np.linalg.solve(s, error))
-
 
 def _pose_of(pose: gtsam.Pose2) -> FloatArray:
     return np.array([pose.x(), pose.y(), pose.theta()], dtype=np.float64)
 
 
-def poses_array(values: gtsam.Values, keys: Sequence[int]) -> FloatArray:
-    """(len(keys), 3) Pose2 values of `keys` from a GTSAM `Values`."""
-    return np.array([_pose_of(values.atPose2(k)) for k in keys], dtype=np.float64).reshape(-1, 3)
+__all__ = [
+    "DEFAULT_LOOP_KERNEL_WIDTH",
+    "POSE_DIM",
+    "Constraint",
+    "GraphConfig",
+    "LoopConstraint",
+    "LoopKernel",
+    "PoseGraph",
+    "Prior",
+    "add_loop_factors",
+    "as_covariance",
+    "as_pose",
+    "gaussian_noise",
+    "loop_noise",
+    "relative_pose_covariance",
+]

@@ -27,15 +27,15 @@ from typing import Any
 
 import numpy as np
 
-from odometry.se2 import compose
 from radar_slam.config import write_yaml
 from radar_slam.errors import TrajectoryError
+from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
 from radar_slam.g2o import write_pose_graph
 from radar_slam.loops import LoopDecision
-from radar_slam.metrics import associate, umeyama_alignment_se2
-from radar_slam.pipeline import OdometryRun, Results
+from radar_slam.pipeline.records import OdometryRun, Results
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory, write_kitti, write_tum
+from raplace.se2 import compose
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +118,16 @@ def _fmt(value: float | int | None, spec: str, unit: str = "") -> str:
     return "n/a" if value is None else f"{value:{spec}}{unit}"
 
 
+def gt_coverage(with_gt: int | None, frames: int) -> str:
+    """The summary line saying over how many scans the accuracy figures were computed."""
+    if with_gt is None:
+        return "ground truth  n/a"
+    return (
+        f"ground truth  accuracy over {with_gt} of {frames} scans "
+        f"({frames - with_gt} without ground truth)"
+    )
+
+
 def slam_summary(results: Results) -> str:
     """A few lines for humans (summary.txt and the terminal)."""
     m = results.metrics
@@ -137,6 +147,7 @@ def slam_summary(results: Results) -> str:
             f"SLAM {_fmt(m.ate_origin_slam_m, '.3f', ' m')} (first pose aligned)",
             f"drift         odometry {_fmt(m.drift_odometry_pct, '.2f', ' %')}, "
             f"SLAM {_fmt(m.drift_slam_pct, '.2f', ' %')} (KITTI segments 100-800 m)",
+            gt_coverage(m.scans_with_gt, m.frames),
         ]
     else:
         lines.append("accuracy      n/a (no ground truth, or fewer than 2 scans with it)")
@@ -211,6 +222,7 @@ def odometry_summary(run: OdometryRun) -> str:
             f"{m.ate_origin_rmse_m:.3f} m (first pose aligned)",
             f"drift         {_fmt(m.drift_trans_pct, '.2f', ' %')}, "
             f"{_fmt(m.drift_rot_deg_per_100m, '.3f', ' deg/100 m')} (KITTI segments 100-800 m)",
+            gt_coverage(m.poses_matched, data["frames"]),
         ]
     return "\n".join(lines) + "\n"
 

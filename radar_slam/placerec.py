@@ -47,8 +47,9 @@ from radar_slam.datasets.frame import RadarFrame
 from radar_slam.errors import RadarSlamError
 from raplace.config import ExclusionConfig, RaPlaceConfig
 from raplace.descriptor import DescriptorExtractor
-from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.retrieval import PlaceRecognizer, Recognizer
 from raplace.scancontext import ScanContextExtractor, ScanContextRecognizer
+from raplace.units import NS_PER_S
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +63,6 @@ NO_MATCH = -1
 """match_index of a query without any candidate."""
 TRUTH_BLOCK_ELEMENTS = 4_000_000
 """Query x map pairs handled per block of the revisit search (bounds memory, ~32 MB)."""
-NS_PER_S = 1e-9
 
 Mode = Literal["intra", "multi"]
 
@@ -349,16 +349,6 @@ class Extractor(Protocol):
     ) -> NDArray[np.float32]: ...
 
 
-class Recognizer(Protocol):
-    def __len__(self) -> int: ...
-
-    def add(self, descriptor: NDArray, key: int, time_s: float | None = None) -> None: ...
-
-    def query(
-        self, descriptor: NDArray, k: int = 1, time_s: float | None = None
-    ) -> list[Candidate]: ...
-
-
 @dataclass
 class MethodRun:
     """One method's extractor and database, and the matches recorded so far (mutable).
@@ -390,14 +380,14 @@ class MethodRun:
         """Insert a frame into the database (computing its descriptor unless given)."""
         desc = self.describe(frame) if desc is None else desc
         start = time.perf_counter()
-        self.recognizer.add(desc, index, frame.timestamp_ns * NS_PER_S)
+        self.recognizer.add(desc, index, frame.timestamp_ns / NS_PER_S)
         self.seconds += time.perf_counter() - start
 
     def query(self, index: int, frame: RadarFrame) -> NDArray[np.float32]:
         """Record the best candidate of a frame; returns its descriptor."""
         desc = self.describe(frame)
         start = time.perf_counter()
-        found = self.recognizer.query(desc, 1, frame.timestamp_ns * NS_PER_S)
+        found = self.recognizer.query(desc, 1, frame.timestamp_ns / NS_PER_S)
         self.seconds += time.perf_counter() - start
         self.query_index.append(index)
         if found:

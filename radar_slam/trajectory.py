@@ -22,15 +22,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.se2 import accumulate, relative_motions, wrap_angle
 from radar_slam.errors import TrajectoryError
+from raplace.se2 import accumulate, relative_motions, wrap_angle
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-NS_PER_S = 1_000_000_000
 TUM_COLUMNS = 8
 KITTI_COLUMNS = 12
 COMMENT_PREFIX = "#"
@@ -259,8 +259,40 @@ def _log_projection(path: Path, off_plane: FloatArray) -> None:
 
 
 # ---------------------------------------------------------------------- TUM
+INTEGER_NS_MIN = 10**17
+"""Integer TUM timestamps at least this large are nanoseconds (epoch ns are about 1.6e18)."""
+INTEGER_US_MIN = 10**14
+"""... and at least this large (below INTEGER_NS_MIN) microseconds (epoch us about 1.6e15)."""
+
+
+def tum_times_ns(path: Path, tokens: list[str]) -> NDArray[np.int64]:
+    """TUM timestamps -> integer ns: decimal seconds, or integer micro/nanoseconds (as MulRan
+    users have), detected by magnitude when every stamp is an integer; the unit detected is
+    stated in a logged warning, since TUM defines seconds."""
+    if all(token.lstrip("-").isdigit() for token in tokens):
+        largest = max(abs(int(token)) for token in tokens)
+        for minimum, unit, scale in (
+            (INTEGER_NS_MIN, "nanoseconds", 1),
+            (INTEGER_US_MIN, "microseconds", 1000),
+        ):
+            if largest >= minimum:
+                logger.warning("%s: integer timestamps read as %s (TUM uses seconds)", path, unit)
+                return _int64_times(path, [int(token) * scale for token in tokens])
+    return _int64_times(path, [parse_seconds_as_ns(token) for token in tokens])
+
+
+def _int64_times(path: Path, times_ns: list[int]) -> NDArray[np.int64]:
+    try:
+        return np.array(times_ns, dtype=np.int64)
+    except OverflowError:
+        raise TrajectoryError(
+            f"{path}: a timestamp is beyond the year 2262 in nanoseconds; TUM uses seconds"
+        ) from None
+
+
 def read_tum(path: Path | str) -> Trajectory:
-    """Read a TUM file `t x y z qx qy qz qw` (t in seconds) as an SE(2) trajectory.
+    """Read a TUM file `t x y z qx qy qz qw` as an SE(2) trajectory: t in seconds, or integer
+    micro- or nanoseconds (see `tum_times_ns`).
 
     Raises TrajectoryError naming the file and line for an empty file, a wrong column count,
     a non-numeric or non-finite value, a zero quaternion, or timestamps not strictly increasing.
@@ -268,7 +300,7 @@ def read_tum(path: Path | str) -> Trajectory:
     path = Path(path)
     rows = _data_lines(path)
     table = _numeric_table(path, rows, TUM_COLUMNS, "t x y z qx qy qz qw")
-    timestamps = np.array([parse_seconds_as_ns(tokens[0]) for _, tokens in rows], dtype=np.int64)
+    timestamps = tum_times_ns(path, [tokens[0] for _, tokens in rows])
     steps = np.diff(timestamps)
     if (steps <= 0).any():
         k = int(np.argmax(steps <= 0)) + 1

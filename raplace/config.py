@@ -2,25 +2,24 @@
 
 `RaPlaceConfig` groups the sections; each stage receives only its own section
 (`DescriptorExtractor(cfg.descriptor)`, `PlaceRecognizer(cfg.retrieval)`,
-`PoseEstimator(cfg.pose)`, `ScanContextRecognizer(cfg.scancontext)`). YAML overrides are merged by
-`radar_slam.config.merge`; `from_dict` below is the package's own strict reader (used to restore a
-saved database) so that raplace never imports radar_slam.
+`PoseEstimator(cfg.pose)`, `ScanContextRecognizer(cfg.scancontext)`). Mappings are read onto these
+defaults by the one strict reader, `raplace.config_io`.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import sys
 import typing
 from dataclasses import dataclass, field
-from typing import Any, Literal, TypeVar
+from typing import Literal
 
-from raplace import RaPlaceError
-
-T = TypeVar("T")
+from raplace import checks
 
 IntensityTransform = Literal["linear", "log1p", "square"]
 MagnitudeTransform = Literal["linear", "sqrt", "log1p"]
+MIN_POSE_N_THETA = 4
+"""Fewest sinogram angles of the pose estimate (an even count: angles pair up across pi)."""
+MAX_DISTANCE = 2.0
+"""Largest RaPlace distance (1 - normalised cross-correlation): the bound of `loop_threshold`."""
 
 
 @dataclass(frozen=True)
@@ -32,7 +31,7 @@ class PreprocessConfig:
     intensity transform.
 
     Attributes:
-        subtract_bin_median: subtract each range bin's median over azimuths (removes ring noise
+        ring_noise_removal: subtract each range bin's median over azimuths (removes ring noise
             and the part of the saturated near range that does not depend on azimuth); negative
             values are clipped to 0.
         min_range_m: bins closer than this are zeroed (saturated near range, the vehicle) [m].
@@ -41,10 +40,15 @@ class PreprocessConfig:
             emphasises strong returns.
     """
 
-    subtract_bin_median: bool = True
+    ring_noise_removal: bool = True
     min_range_m: float = 3.0
     noise_floor: float = 0.0
     intensity: IntensityTransform = "linear"
+
+    def __post_init__(self) -> None:
+        checks.non_negative("min_range_m", self.min_range_m)
+        checks.non_negative("noise_floor", self.noise_floor)
+        checks.one_of("intensity", self.intensity, typing.get_args(IntensityTransform))
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,12 @@ class ImageConfig:
     max_range_m: float = 80.0
     taper_fraction: float = 0.1
     subtract_mean: bool = True
+
+    def __post_init__(self) -> None:
+        checks.positive("cell_m", self.cell_m)
+        checks.positive("max_range_m", self.max_range_m)
+        checks.less("cell_m", self.cell_m, "max_range_m", self.max_range_m)
+        checks.in_range("taper_fraction", self.taper_fraction, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -94,6 +104,15 @@ class DescriptorConfig:
     pad_factor: int = 2
     magnitude: MagnitudeTransform = "sqrt"
 
+    def __post_init__(self) -> None:
+        checks.at_least("n_theta", self.n_theta, 1)
+        checks.at_least("theta_oversample", self.theta_oversample, 1)
+        checks.at_least("n_freq", self.n_freq, 1)
+        checks.positive("max_freq_cpm", self.max_freq_cpm)
+        checks.in_range("max_freq_cpm", self.max_freq_cpm, 0.0, 0.5 / self.image.cell_m)  # Nyquist
+        checks.at_least("pad_factor", self.pad_factor, 1)
+        checks.one_of("magnitude", self.magnitude, typing.get_args(MagnitudeTransform))
+
 
 @dataclass(frozen=True)
 class ExclusionConfig:
@@ -107,6 +126,10 @@ class ExclusionConfig:
 
     recent_keyframes: int = 50
     recent_seconds: float = 0.0
+
+    def __post_init__(self) -> None:
+        checks.at_least("recent_keyframes", self.recent_keyframes, 0)
+        checks.non_negative("recent_seconds", self.recent_seconds)
 
 
 @dataclass(frozen=True)
@@ -133,6 +156,13 @@ class RetrievalConfig:
     neighbour_radius: int = 2
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
     loop_threshold: float = 0.2
+
+    def __post_init__(self) -> None:
+        checks.at_least("coarse_theta_pool", self.coarse_theta_pool, 1)
+        checks.at_least("coarse_n_freq", self.coarse_n_freq, 1)
+        checks.at_least("coarse_candidates", self.coarse_candidates, 1)
+        checks.at_least("neighbour_radius", self.neighbour_radius, 0)
+        checks.in_range("loop_threshold", self.loop_threshold, 0.0, MAX_DISTANCE, open_low=True)
 
 
 @dataclass(frozen=True)
@@ -164,6 +194,16 @@ class PoseConfig:
     inlier_threshold_m: float = 1.0
     refine_iterations: int = 1
 
+    def __post_init__(self) -> None:
+        checks.at_least("n_theta", self.n_theta, MIN_POSE_N_THETA)
+        checks.even("n_theta", self.n_theta)
+        checks.at_least("pad_factor", self.pad_factor, 1)
+        checks.in_range("whitening", self.whitening, 0.0, 1.0)
+        checks.at_least("shift_upsample", self.shift_upsample, 1)
+        checks.at_least("rotation_peaks", self.rotation_peaks, 1)
+        checks.positive("inlier_threshold_m", self.inlier_threshold_m)
+        checks.at_least("refine_iterations", self.refine_iterations, 0)
+
 
 @dataclass(frozen=True)
 class ScanContextConfig:
@@ -190,6 +230,14 @@ class ScanContextConfig:
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
     loop_threshold: float = 0.2
 
+    def __post_init__(self) -> None:
+        checks.positive("range_cell_m", self.range_cell_m)
+        checks.at_least("n_rings", self.n_rings, 1)
+        checks.at_least("n_sectors", self.n_sectors, 1)
+        checks.positive("max_range_m", self.max_range_m)
+        checks.at_least("n_candidates", self.n_candidates, 1)
+        checks.in_range("loop_threshold", self.loop_threshold, 0.0, 1.0, open_low=True)
+
 
 @dataclass(frozen=True)
 class RaPlaceConfig:
@@ -200,33 +248,15 @@ class RaPlaceConfig:
     pose: PoseConfig = field(default_factory=PoseConfig)
     scancontext: ScanContextConfig = field(default_factory=ScanContextConfig)
 
-
-def to_dict(config: Any) -> dict[str, Any]:
-    """A plain nested dict of a config dataclass (JSON/YAML ready)."""
-    return dataclasses.asdict(config)
-
-
-def from_dict(cls: type[T], data: dict[str, Any]) -> T:
-    """Build `cls` from a nested dict, strictly: unknown keys raise RaPlaceError.
-
-    Missing keys take the defaults; nested dataclass sections recurse; lists become tuples where
-    the field is a tuple. Values are not type-coerced beyond that (radar_slam.config.merge does
-    full validation of user files).
-    """
-    if not isinstance(data, dict):
-        raise RaPlaceError(f"{cls.__name__}: expected a mapping, got {type(data).__name__}")
-    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    hints = typing.get_type_hints(cls, globalns=vars(sys.modules[cls.__module__]))
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise RaPlaceError(f"{cls.__name__}: unknown keys {unknown} (known: {sorted(fields)})")
-    values: dict[str, Any] = {}
-    for key, value in data.items():
-        hint = hints[key]
-        if dataclasses.is_dataclass(hint):
-            values[key] = from_dict(hint, value)  # type: ignore[arg-type]
-        elif typing.get_origin(hint) is tuple and isinstance(value, list):
-            values[key] = tuple(value)
-        else:
-            values[key] = value
-    return cls(**values)
+    def __post_init__(self) -> None:
+        n_theta, pool = self.descriptor.n_theta, self.retrieval.coarse_theta_pool
+        if n_theta % pool:
+            raise ValueError(
+                f"retrieval.coarse_theta_pool: must divide descriptor.n_theta ({n_theta}), "
+                f"got {pool}"
+            )
+        if self.retrieval.coarse_n_freq > self.descriptor.n_freq:
+            raise ValueError(
+                f"retrieval.coarse_n_freq: must be at most descriptor.n_freq "
+                f"({self.descriptor.n_freq}), got {self.retrieval.coarse_n_freq}"
+            )

@@ -34,6 +34,7 @@ from raplace.config import PoseConfig
 from raplace.descriptor import ImageSpectrum, image_spectrum, radial_spectrum, unit_phasor
 from raplace.preprocess import CartesianImager
 from raplace.scoring import circular_peak, parabolic_vertex
+from raplace.se2 import wrap_angle
 
 WHITENING_EPS = 1e-12
 """Guard of the cross-power normalisation |P|^-beta."""
@@ -91,12 +92,6 @@ class _Hypothesis:
     residual: float
     inliers: NDArray[np.bool_]
     rows: NDArray[np.complex64]  # de-rotated map rows at this yaw
-
-
-def wrap_angle(angle: float) -> float:
-    """Angle wrapped to (-pi, pi] [rad]."""
-    wrapped = float(np.mod(angle + np.pi, 2.0 * np.pi) - np.pi)
-    return np.pi if wrapped == -np.pi else wrapped
 
 
 def rotation_candidates(
@@ -297,7 +292,7 @@ def relative_pose(
     return RelativePose(
         dx_m=float(best.xy[0]),
         dy_m=float(best.xy[1]),
-        dyaw_rad=wrap_angle(best.yaw),
+        dyaw_rad=float(wrap_angle(best.yaw)),
         quality=quality,
         residual_m=best.residual,
         inlier_fraction=float(best.inliers.mean()),

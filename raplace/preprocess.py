@@ -70,7 +70,7 @@ def suppress_noise(
         (n_azimuths, n_bins) float32, non-negative.
     """
     out = np.array(polar, dtype=np.float32, copy=True)
-    if cfg.subtract_bin_median:
+    if cfg.ring_noise_removal:
         out -= np.median(out, axis=0, keepdims=True)
     if cfg.noise_floor > 0:
         out -= np.float32(cfg.noise_floor)

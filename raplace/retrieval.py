@@ -25,7 +25,8 @@ import scipy.fft
 from numpy.typing import NDArray
 
 from raplace import RaPlaceError
-from raplace.config import ExclusionConfig, RetrievalConfig, from_dict, to_dict
+from raplace.config import ExclusionConfig, RetrievalConfig
+from raplace.config_io import from_dict, to_dict
 from raplace.descriptor import coarse_descriptor
 from raplace.scoring import score, theta_spectrum
 
@@ -154,6 +155,21 @@ def load_npz(path: Path, method: str) -> tuple[dict, dict[str, NDArray]]:
             f"expected {method!r} version {FILE_FORMAT_VERSION}"
         )
     return meta["config"], arrays
+
+
+class Recognizer(Protocol):
+    """A place database: `PlaceRecognizer`, `ScanContextRecognizer`, or your own.
+
+    Keys are the caller's (scan indices); `time_s` [s] lets the database exclude recent entries.
+    """
+
+    def __len__(self) -> int: ...
+
+    def add(self, descriptor: NDArray, key: int, time_s: float | None = None) -> None: ...
+
+    def query(
+        self, descriptor: NDArray, k: int = 1, time_s: float | None = None
+    ) -> list[Candidate]: ...
 
 
 class BatchDatabase(Protocol):

@@ -11,19 +11,25 @@ Two benchmarks:
   (`synthetic/loop`, `synthetic/long`, ...; simulated ones are generated on first use under the
   data root), reporting KITTI-style drift [% and deg/100 m], ATE (Umeyama and first-pose
   alignment), the normalised squared errors (NEES) of the reported covariances and frames/s
-  (register() only, frame loading excluded).
+  (register() only, frame loading excluded), gaps and the longest run of consecutive gaps. With
+  `--stride K` (repeatable) every sequence also runs on every K-th scan (4 Hz data at 2 or 1 Hz);
+  `--held-out SEQ` sequences are reported in their own part of the table (never tune on them);
+  `--table FILE` writes the Markdown table (scenarios x strides) that the README shows.
 
 Usage: python scripts/bench_odometry.py [--frames N] [--speed MPS] [--yaw-rate DPS] [--scan PNG]
        python scripts/bench_odometry.py --sequence synthetic/loop --sequence synthetic/long
+           [--held-out SEQ] [--stride 1 --stride 2 --stride 4] [--table FILE]
            [--data-root DIR] [--max-frames N]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -32,11 +38,12 @@ from numpy.typing import NDArray
 
 from odometry.deskew import motion_from_twist
 from odometry.odometry import Odometry, OdometryResult
-from odometry.se2 import between, compose, wrap_angle
 from radar_slam.datasets import RadarFrame, open_sequence
-from radar_slam.metrics import evaluate
+from radar_slam.datasets.stride import strided
+from radar_slam.evaluation.metrics import evaluate
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory
+from raplace.se2 import between, compose, wrap_angle
 from raplace.warp import polar_sample_coords, remap
 
 logger = logging.getLogger("bench_odometry")
@@ -129,12 +136,36 @@ def reference_nees(
     return np.array(nees)
 
 
+@dataclass(frozen=True)
+class SequenceRow:
+    """One (sequence, stride) line of the accuracy table."""
+
+    spec: str
+    stride: int
+    frames: int
+    length_m: float | None
+    drift_pct: float | None
+    drift_deg_per_100m: float | None
+    ate_m: float | None
+    gaps: int
+    longest_gap_run: int
+    frames_per_s: float
+    held_out: bool = False
+
+
 def bench_sequence(
-    spec: str, data_root: Path | None, max_frames: int | None, plot_dir: Path | None
-) -> None:
-    """Run the odometry over one sequence and log its accuracy and speed; with `plot_dir`, save
-    `odometry_<sequence>.png` there (ground truth moved to start at the first odometry pose)."""
-    sequence = open_sequence(spec, data_root=data_root)
+    spec: str,
+    data_root: Path | None,
+    max_frames: int | None,
+    plot_dir: Path | None,
+    stride: int = 1,
+    held_out: bool = False,
+) -> SequenceRow:
+    """Run the odometry over one sequence (every `stride`-th scan) and log its accuracy and
+    speed; with `plot_dir`, save `odometry_<sequence>[_strideK].png` there (ground truth moved to
+    start at the first odometry pose)."""
+    sequence = strided(open_sequence(spec, data_root=data_root), stride)
+    label = spec if stride == 1 else f"{spec} --stride {stride}"
     n = len(sequence) if max_frames is None else min(len(sequence), max_frames)
     odometry = Odometry()
     durations = []
@@ -146,19 +177,34 @@ def bench_sequence(
     ms = np.array(durations[1:]) * 1e3
     stamps = sequence.timestamps_ns[:n]
     estimate = Trajectory(stamps, odometry.poses)
+    gap_run = odometry.longest_gap_run
     logger.info(
-        "%s: %d frames, %d keyframes, %d gaps; %.1f ms/frame -> %.1f frames/s",
-        spec,
+        "%s: %d frames, %d keyframes, %d gaps (longest run %d); %.1f ms/frame -> %.1f frames/s",
+        label,
         n,
         len(odometry.keyframes),
         len(odometry.gaps),
+        gap_run,
         ms.mean(),
         1e3 / ms.mean(),
+    )
+    row = SequenceRow(
+        spec=spec,
+        stride=stride,
+        frames=n,
+        length_m=None,
+        drift_pct=None,
+        drift_deg_per_100m=None,
+        ate_m=None,
+        gaps=len(odometry.gaps),
+        longest_gap_run=gap_run,
+        frames_per_s=float(1e3 / ms.mean()),
+        held_out=held_out,
     )
     gt_poses = sequence.ground_truth
     if gt_poses is None:
         logger.info("  no ground truth")
-        return
+        return row
     truth = Trajectory.from_arrays(stamps, gt_poses[:n], drop_nonfinite=True)
     m = evaluate(estimate, truth)
     drift = (
@@ -175,17 +221,49 @@ def bench_sequence(
         m.ate_rmse_m,
         m.ate_origin_rmse_m,
         m.rpe_trans_rmse_m,
-        nees.mean(),
-        np.median(nees),
+        nees.mean() if len(nees) else float("nan"),
+        np.median(nees) if len(nees) else float("nan"),
     )
     if plot_dir is not None:
         start = between(truth.poses[0], truth.poses)
-        path = plot_dir / f"odometry_{spec.replace('/', '_')}.png"
+        suffix = "" if stride == 1 else f"_stride{stride}"
+        path = plot_dir / f"odometry_{spec.replace('/', '_')}{suffix}.png"
         plot_trajectories(
             path,
             {"gt": Trajectory(truth.timestamps_ns, start), "odometry": estimate},
-            title=f"{spec}: odometry, drift {drift}",
+            title=f"{label}: odometry, drift {drift}",
         )
+    return dataclasses.replace(
+        row,
+        length_m=truth.length_m(),
+        drift_pct=m.drift_trans_pct,
+        drift_deg_per_100m=m.drift_rot_deg_per_100m,
+        ate_m=m.ate_rmse_m,
+    )
+
+
+def _fmt(value: float | None, digits: int) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
+
+
+def markdown_table(rows: list[SequenceRow]) -> str:
+    """The accuracy table (one line per sequence and stride), held-out sequences last."""
+    lines = [
+        "| sequence | stride | scans | length [m] | drift [%] | drift [deg/100 m] | ATE [m] "
+        "| gaps | longest gap run |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for held_out in (False, True):
+        chosen = [r for r in rows if r.held_out == held_out]
+        if held_out and chosen:
+            lines.append("| **held out** | | | | | | | | |")
+        for r in chosen:
+            lines.append(
+                f"| `{r.spec}` | {r.stride} | {r.frames} | {_fmt(r.length_m, 0)} "
+                f"| {_fmt(r.drift_pct, 2)} | {_fmt(r.drift_deg_per_100m, 2)} "
+                f"| {_fmt(r.ate_m, 2)} | {r.gaps} | {r.longest_gap_run} |"
+            )
+    return "\n".join(lines) + "\n"
 
 
 def main() -> None:
@@ -200,6 +278,20 @@ def main() -> None:
         default=[],
         help="run on this sequence (family/sequence or folder) instead; repeatable",
     )
+    parser.add_argument(
+        "--held-out",
+        action="append",
+        default=[],
+        help="a sequence kept out of tuning: reported separately in the table; repeatable",
+    )
+    parser.add_argument(
+        "--stride",
+        action="append",
+        type=int,
+        default=[],
+        help="use every K-th scan (repeatable: one table line per stride; default 1)",
+    )
+    parser.add_argument("--table", type=Path, default=None, help="write the Markdown table here")
     parser.add_argument("--data-root", type=Path, default=None, help="data root for --sequence")
     parser.add_argument("--max-frames", type=int, default=None, help="frames per --sequence")
     parser.add_argument(
@@ -208,9 +300,19 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     cv2.setNumThreads(1)  # one core; numpy's FFT is single-threaded already
-    if args.sequence:
-        for spec in args.sequence:
-            bench_sequence(spec, args.data_root, args.max_frames, args.plot_dir)
+    if args.sequence or args.held_out:
+        specs = [(spec, False) for spec in args.sequence] + [(s, True) for s in args.held_out]
+        rows = [
+            bench_sequence(spec, args.data_root, args.max_frames, args.plot_dir, stride, held)
+            for spec, held in specs
+            for stride in args.stride or [1]
+        ]
+        table = markdown_table(rows)
+        logger.info("\n%s", table)
+        if args.table is not None:
+            tmp = args.table.with_name(args.table.name + ".tmp")
+            tmp.write_text(table)
+            tmp.replace(args.table)
         return
 
     world = world_scan(args.scan)

@@ -27,8 +27,8 @@ import cv2
 import numpy as np
 
 from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import Sequence
-from radar_slam.false_loops import FalseLoopInjection
+from radar_slam.datasets.frame import RadarSequence
+from radar_slam.evaluation.false_loops import FalseLoopInjection
 from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
 from raplace.retrieval import PlaceRecognizer
@@ -40,7 +40,7 @@ INJECTION_SEED = 1
 
 
 def run_once(
-    sequence: Sequence, config: PipelineConfig, max_frames: int | None, inject: float | None
+    sequence: RadarSequence, config: PipelineConfig, max_frames: int | None, inject: float | None
 ) -> tuple[Results, float, int]:
     """(results, CPU seconds, injected false loops that passed verification)."""
     detector = None

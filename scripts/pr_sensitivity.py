@@ -28,7 +28,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from radar_slam.datasets import RadarFrame, Sequence, open_sequence
+from radar_slam.datasets import RadarFrame, RadarSequence, open_sequence
 from radar_slam.placerec import method_runs, with_exclusion
 from raplace.config import ExclusionConfig, RaPlaceConfig
 
@@ -109,7 +109,7 @@ def distances(
     return {run.method: np.asarray(run.distance) for run in runs}
 
 
-def other_places(sequence: Sequence, frame_index: int) -> list[int]:
+def other_places(sequence: RadarSequence, frame_index: int) -> list[int]:
     """Up to MAX_OTHER_PLACES frames (evenly spread) at least OTHER_PLACE_M from the frame."""
     gt = sequence.ground_truth
     if gt is None:
@@ -122,7 +122,7 @@ def other_places(sequence: Sequence, frame_index: int) -> list[int]:
 
 
 def closest_other_place(
-    sequence: Sequence, frame_index: int, max_range_m: float, cfg: RaPlaceConfig
+    sequence: RadarSequence, frame_index: int, max_range_m: float, cfg: RaPlaceConfig
 ) -> dict[str, float] | None:
     """Each method's smallest distance from the scan to the scans of other places (the hardest
     negative), or None when the sequence has no ground truth or no other place."""

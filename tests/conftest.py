@@ -4,6 +4,7 @@ per test session."""
 
 from __future__ import annotations
 
+from importlib.util import find_spec
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +12,9 @@ import pytest
 from numpy.typing import NDArray
 from raplace_scenes import oxford_scans
 
+from radar_slam.cli import main
 from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 OXFORD_SEQ = SHARED_DATA / "oxford" / "2019-01-10-14-36-48-partial"
@@ -75,13 +77,37 @@ def synthetic_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def tiny(synthetic_root: Path) -> Sequence:
+def tiny(synthetic_root: Path) -> RadarSequence:
     """`synthetic/tiny`: 60 scans of 1024 bins (generated in about a second)."""
     return open_sequence("synthetic/tiny", synthetic_root)
 
 
 @pytest.fixture(scope="session")
-def tiny_loop(synthetic_root: Path) -> Sequence:
+def tiny_loop(synthetic_root: Path) -> RadarSequence:
     """`synthetic/tiny_loop`: a small loop with a revisit, 177 scans of 1024 bins (generated in a
     few seconds)."""
     return open_sequence("synthetic/tiny_loop", synthetic_root)
+
+
+@pytest.fixture(scope="session")
+def tiny_loop_runs(
+    tiny_loop: RadarSequence, synthetic_root: Path, tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    """`run` on synthetic/tiny_loop (with a viewer recording) and on its ROS 1 bag export:
+    <tmp>/folder/, <tmp>/bag/, <tmp>/viewer.rrd (when rerun-sdk is installed)."""
+    tmp = tmp_path_factory.mktemp("tiny_loop_runs")
+    bag = tmp / "tiny_loop.bag"
+    root = ["--data-root", str(synthetic_root)]
+    assert main(["export", "synthetic/tiny_loop", "--bag", str(bag), *root]) == 0
+    folder_run = ["run", "synthetic/tiny_loop", "--out", str(tmp / "folder"), *root]
+    viewer = ["--viewer", str(tmp / "viewer.rrd")] if find_spec("rerun") is not None else []
+    assert main([*folder_run, *viewer]) == 0
+    assert main(["run", str(bag), "--out", str(tmp / "bag")]) == 0
+    return tmp
+
+
+@pytest.fixture()
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty current folder (a default results/ folder would be written here)."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path

@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from radar_slam.commands import evaluate as evaluate_command
 from radar_slam.errors import ResultsError, TrajectoryError
-from radar_slam.metrics import evaluate
+from radar_slam.evaluation.metrics import evaluate
 from radar_slam.trajectory import Trajectory, read_kitti, read_tum, write_kitti, write_tum
 
 T0_NS = 1_564_718_976_161_407_002

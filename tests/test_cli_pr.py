@@ -14,7 +14,6 @@ import pytest
 from raplace_scenes import synthetic_world
 from typer.testing import CliRunner
 
-from odometry import se2
 from radar_slam.cli import app, main
 from radar_slam.commands.placerec import MATCHES_HEADER, load_config
 from radar_slam.datasets import open_sequence
@@ -25,7 +24,9 @@ from radar_slam.datasets.navtech import (
     MULRAN_T_BASE_RADAR,
 )
 from radar_slam.placerec import intra_session_candidate_counts, pr_curve, revisit_truth
+from raplace import se2
 from raplace.config import ExclusionConfig
+from raplace.units import NS_PER_S
 
 T0_NS = 1_600_000_000_000_000_000
 PERIOD_NS = 250_000_000
@@ -167,7 +168,7 @@ def test_intra_session_writes_curves_matches_and_config(data_root: Path, tmp_pat
     xy = sequence.ground_truth[:, :2]
     match = np.array([index_of.get(int(r["match_ns"] or -1), -1) for r in raplace_rows])
     distance = np.array([float(r["distance"]) for r in raplace_rows])
-    counts = intra_session_candidate_counts(stamps * 1e-9, ExclusionConfig(EXCLUDE, 0.0))
+    counts = intra_session_candidate_counts(stamps / NS_PER_S, ExclusionConfig(EXCLUDE, 0.0))
     revisit = revisit_truth(xy, xy, counts, 20.0)
     correct = (match >= 0) & (np.linalg.norm(xy - xy[match], axis=1) <= 20.0)
     curve = pr_curve(distance, correct, revisit)

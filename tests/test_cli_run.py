@@ -12,13 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry.se2 import between
 from radar_slam.cli import main
 from radar_slam.datasets import open_sequence
 from radar_slam.g2o import G2oEdge, G2oGraph, read_g2o, write_g2o
 from radar_slam.outputs import LOOPS_CSV_COLUMNS, SLAM_RESULT_FILES
 from radar_slam.pipeline import SlamMetrics, load_config, run_odometry
 from radar_slam.trajectory import read_kitti, read_tum
+from raplace.se2 import between
 
 METRICS_KEYS = {
     "frames",

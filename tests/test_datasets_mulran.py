@@ -10,8 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry import se2
-from radar_slam.datasets import MulRanSequence, Sequence
+from radar_slam.datasets import MulRanSequence, RadarSequence
 from radar_slam.datasets.mulran import (
     OXFORD_FORM_FOLDERS,
     POLAR_FOLDERS,
@@ -20,6 +19,8 @@ from radar_slam.datasets.mulran import (
 )
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from raplace import se2
+from raplace.units import NS_PER_S
 
 pytestmark = pytest.mark.realdata
 
@@ -40,7 +41,7 @@ BASE_VX, BASE_VY, BASE_YAW_RATE = 8.0, -3.0, 0.4  # m/s, m/s, rad/s
 
 def base_pose_at(t_ns: np.ndarray) -> np.ndarray:
     """Analytic base pose (N, 3) of the synthetic GT at times t_ns."""
-    t = (np.asarray(t_ns, dtype=np.int64) - GT_START_NS) / 1e9
+    t = (np.asarray(t_ns, dtype=np.int64) - GT_START_NS) / NS_PER_S
     return np.stack(
         [BASE_X0 + BASE_VX * t, BASE_Y0 + BASE_VY * t, BASE_YAW0 + BASE_YAW_RATE * t], axis=-1
     )
@@ -91,7 +92,7 @@ def raw_csv(mulran_raw_dir: Path) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("relative", POLAR_FOLDERS)
 def test_every_polar_layout_loads(tmp_path: Path, mulran_raw_dir: Path, relative: str) -> None:
     seq = MulRanSequence(make_sequence(tmp_path, mulran_raw_dir, relative))
-    assert isinstance(seq, Sequence)
+    assert isinstance(seq, RadarSequence)
     assert is_mulran_sequence(seq.folder)
     assert (seq.name, seq.family, len(seq)) == ("KAIST01", "mulran", N_SCANS)
     assert seq.timestamps_ns.dtype == np.int64
@@ -173,7 +174,7 @@ def test_ground_truth_interpolated_with_extrinsic(tmp_path: Path, mulran_raw_dir
 
 
 def test_interpolation_wraps_yaw_and_clamps() -> None:
-    times = np.array([0, 1_000_000_000], dtype=np.int64)
+    times = np.array([0, NS_PER_S], dtype=np.int64)
     poses = np.array([[0.0, 0.0, np.pi - 0.1], [2.0, 4.0, -np.pi + 0.1]])
     queries = np.array([500_000_000, -400_000_000, 1_400_000_000, 1_600_000_000], dtype=np.int64)
     result = interpolate_poses(times, poses, queries)
@@ -188,15 +189,15 @@ def test_scans_outside_gt_are_nan_with_warning(
     tmp_path: Path, mulran_raw_dir: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     seq_dir = make_sequence(tmp_path, mulran_raw_dir, gt=False)
-    times = gt_times()[
-        :3
-    ]  # GT ends at scan 0 + 0.063 s: scan 2 (0.437 s later) clamps, scan 3 (0.687 s) is NaN
+    # GT rows every 0.1 s end at scan 0 + 0.063 s: scan 1 (0.187 s past the end, more than one
+    # GT period) and later have no GT; nothing is stretched to them (issue 12).
+    times = gt_times()[:3]
     write_global_pose(seq_dir / "global_pose.csv", times, base_pose_at(np.array(times)))
     with caplog.at_level(logging.WARNING):
         gt = MulRanSequence(seq_dir).ground_truth
     assert gt is not None
-    assert np.isfinite(gt[:3]).all() and np.isnan(gt[3]).all()
-    assert "1 of 4 scans" in caplog.text and "global_pose.csv" in caplog.text
+    assert np.isfinite(gt[0]).all() and np.isnan(gt[1:]).all()
+    assert "3 of 4 scans" in caplog.text and "global_pose.csv" in caplog.text
 
 
 def test_no_gt_and_lazy_frames(tmp_path: Path, mulran_raw_dir: Path) -> None:

@@ -9,10 +9,10 @@ import cv2
 import numpy as np
 import pytest
 
-from odometry import se2
-from radar_slam.datasets import OxfordSequence, Sequence
+from radar_slam.datasets import OxfordSequence, RadarSequence
 from radar_slam.datasets.oxford import is_oxford_sequence
 from radar_slam.errors import DatasetFormatError
+from raplace import se2
 
 pytestmark = pytest.mark.realdata
 
@@ -40,7 +40,7 @@ def copy_sequence(oxford_dir: Path, target: Path, n_scans: int = 3, gt: bool = T
 
 
 def test_frames(oxford: OxfordSequence) -> None:
-    assert isinstance(oxford, Sequence)
+    assert isinstance(oxford, RadarSequence)
     assert is_oxford_sequence(oxford.folder)
     assert (len(oxford), oxford.family, oxford.name) == (
         N_FRAMES,

@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry import se2
 from radar_slam.errors import GraphFormatError
 from radar_slam.g2o import (
     G2oEdge,
@@ -23,6 +22,7 @@ from radar_slam.g2o import (
     write_pose_graph,
 )
 from radar_slam.graph import GraphConfig, PoseGraph
+from raplace import se2
 
 ODOMETRY_COV = np.array(
     [[0.0025, 0.0004, 0.0001], [0.0004, 0.0036, -0.0002], [0.0001, -0.0002, 4e-5]]

@@ -8,9 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from odometry.se2 import accumulate, between, compose, relative_motions
-from radar_slam.datasets.frame import RadarFrame, Sequence
-from radar_slam.datasets.synthetic import open_synthetic
+from radar_slam.datasets.frame import RadarFrame, RadarSequence
+from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import GraphConfig, PoseGraph
 from radar_slam.loops import (
     ConsistencyConfig,
@@ -24,14 +23,16 @@ from radar_slam.loops import (
     NullLoopDetector,
     VerifiedLoop,
     cycle_mahalanobis,
-    is_true_loop,
     loop_covariance,
     make_loop_detector,
     motion_compensated,
 )
+from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import get_scenario
 from raplace.retrieval import Candidate, PlaceRecognizer
+from raplace.se2 import accumulate, between, compose, relative_motions
+from raplace.units import NS_PER_S
 
 SCAN_PERIOD_S = 0.25
 TRUE_TOLERANCE_M = 0.3
@@ -42,31 +43,31 @@ LAP_GAP_NS = 60_000_000_000  # the second pass starts a minute after the first e
 
 
 @pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> RadarSequence:
     """The simulator's `tiny` scenario (60 scans, 1024 bins, about 100 m, no revisit)."""
     folder = tmp_path_factory.mktemp("loops") / "tiny"
     generate_sequence(get_scenario("tiny"), folder)
     return open_synthetic(folder)
 
 
-def gt_relative(sequence: Sequence, i: int, j: int) -> np.ndarray:
+def gt_relative(sequence: RadarSequence, i: int, j: int) -> np.ndarray:
     gt = sequence.ground_truth
     assert gt is not None
     return between(gt[i], gt[j])
 
 
-def twist(sequence: Sequence, k: int) -> np.ndarray:
+def twist(sequence: RadarSequence, k: int) -> np.ndarray:
     """Ground-truth body velocity of scan k (vx, vy, yaw rate) from the neighbouring scans."""
     motion = gt_relative(sequence, k - 1, k)
     return motion / SCAN_PERIOD_S
 
 
-def key_scan(sequence: Sequence, k: int, frame: RadarFrame | None = None) -> KeyScan:
+def key_scan(sequence: RadarSequence, k: int, frame: RadarFrame | None = None) -> KeyScan:
     frame = sequence[k] if frame is None else frame
     return KeyScan(k, frame.timestamp_ns, frame, twist(sequence, k))
 
 
-def test_verifier_accepts_a_revisit_and_rejects_a_wrong_candidate(tiny: Sequence) -> None:
+def test_verifier_accepts_a_revisit_and_rejects_a_wrong_candidate(tiny: RadarSequence) -> None:
     verify = GeometricVerifier(LoopClosureConfig())
     query, near, far = 40, 36, 5
     result = verify(key_scan(tiny, query), key_scan(tiny, near))
@@ -102,7 +103,7 @@ def test_loop_covariance_grows_as_quality_falls() -> None:
     assert np.trace(disagree) > np.trace(floor)
 
 
-def test_verified_covariance_reflects_the_match_quality(tiny: Sequence) -> None:
+def test_verified_covariance_reflects_the_match_quality(tiny: RadarSequence) -> None:
     peak_only = LoopCovarianceConfig(disagreement_weight=0.0, min_sigma_xy_m=1e-3)
     verify = GeometricVerifier(LoopClosureConfig(covariance=peak_only))
     clean = verify(key_scan(tiny, 40), key_scan(tiny, 37))
@@ -117,14 +118,14 @@ def test_verified_covariance_reflects_the_match_quality(tiny: Sequence) -> None:
     assert np.trace(noisy.covariance[:2, :2]) > np.trace(clean.covariance[:2, :2])
 
 
-def test_motion_compensation_moves_opposite_scans_by_speed_times_sweep(tiny: Sequence) -> None:
+def test_motion_compensation_moves_opposite_scans_by_speed_times_sweep(tiny: RadarSequence) -> None:
     frame = tiny[10]
     speed = 10.0
     moving = np.array([speed, 0.0, 0.0])
     query = KeyScan(0, frame.timestamp_ns, frame, moving)
     match = KeyScan(1, frame.timestamp_ns, frame, moving)
     times = np.asarray(frame.azimuth_times_ns, dtype=np.float64)
-    mean_offset_s = float(np.mean(times - frame.timestamp_ns)) / 1e9
+    mean_offset_s = float(np.mean(times - frame.timestamp_ns)) / NS_PER_S
     facing = np.array([0.0, 0.0, np.pi])  # the match faces the other way
     corrected = motion_compensated(facing, query, match)
     assert np.isclose(corrected[0], 2 * speed * mean_offset_s)  # about -2.5 m at 10 m/s
@@ -281,7 +282,7 @@ class InjectOnce:
         return found
 
 
-def test_detector_records_every_decision_with_a_reason(tiny: Sequence) -> None:
+def test_detector_records_every_decision_with_a_reason(tiny: RadarSequence) -> None:
     """A revisit: the tiny drive, then its first half again (every other scan, so the scans
     differ from the first pass) a lap later, with ground-truth poses; one wrong candidate is
     forced into the queries."""
@@ -318,14 +319,14 @@ def test_detector_records_every_decision_with_a_reason(tiny: Sequence) -> None:
     assert "sinogram" in forced[0].reason or "phase" in forced[0].reason
 
 
-def test_null_detector_does_nothing(tiny: Sequence) -> None:
+def test_null_detector_does_nothing(tiny: RadarSequence) -> None:
     null = make_loop_detector(LoopClosureConfig(enabled=False))
     assert isinstance(null, NullLoopDetector)
     assert null.add(tiny[0], np.zeros(3), 0) == [] and null.finish() == []
     assert null.decisions == [] and null.tally() == (0, 0)
 
 
-def test_detector_without_poses_keeps_scans_and_checks_keys(tiny: Sequence) -> None:
+def test_detector_without_poses_keeps_scans_and_checks_keys(tiny: RadarSequence) -> None:
     detector = LoopDetector(LoopClosureConfig())
     detector.add(tiny[0])
     detector.add(tiny[1])

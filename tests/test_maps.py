@@ -12,10 +12,9 @@ import numpy as np
 import pytest
 
 from odometry import OdometryConfig
-from odometry.se2 import between, wrap_angle
 from radar_slam.cli import main
 from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.loops import GeometricVerifier, KeyScan, LoopClosureConfig
 from radar_slam.maps import ImageGeometry, KeyframeImager, Map, MapError, build_map
 from radar_slam.maps.build import select_keyframes
@@ -26,18 +25,19 @@ from radar_slam.maps.session import join_session
 from radar_slam.maps.writers import LOCALIZATION_CSV_COLUMNS
 from radar_slam.pipeline import Pipeline, Results, load_config
 from radar_slam.trajectory import read_tum
+from raplace.se2 import between, compose, wrap_angle
 
 MAP_FRAMES = 110
 """Scans of tiny_loop that make the map (the first lap and a bit)."""
 
 
 @pytest.fixture(scope="module")
-def map_run(tiny_loop: Sequence) -> Results:
+def map_run(tiny_loop: RadarSequence) -> Results:
     return Pipeline(tiny_loop, load_config("synthetic"), max_frames=MAP_FRAMES).run()
 
 
 @pytest.fixture(scope="module")
-def tiny_map(map_run: Results, tiny_loop: Sequence) -> Map:
+def tiny_map(map_run: Results, tiny_loop: RadarSequence) -> Map:
     return build_map(map_run, tiny_loop)
 
 
@@ -65,7 +65,6 @@ def test_map_content(tiny_map: Map, map_run: Results) -> None:
     assert np.all(np.isfinite(tiny_map.gt_poses))
     # The stored alignment takes the map's poses onto the ground truth (SLAM ATE is ~0.1 m).
     assert tiny_map.gt_alignment is not None
-    from odometry.se2 import compose
 
     placed = compose(tiny_map.gt_alignment, tiny_map.poses)
     assert np.max(np.hypot(*(placed[:, :2] - tiny_map.gt_poses[:, :2]).T)) < 1.0
@@ -144,7 +143,7 @@ def test_map_info(saved_map: Path, tiny_map: Map, capsys: pytest.CaptureFixture[
     assert "GT alignment" in capsys.readouterr().out
 
 
-def test_keyframe_image_verifies_like_the_scan(tiny_loop: Sequence) -> None:
+def test_keyframe_image_verifies_like_the_scan(tiny_loop: RadarSequence) -> None:
     """A loop verified against a keyframe's stored image (made back into a scan) recovers the
     ground-truth relative pose as well as one against the scan itself."""
     imager = KeyframeImager(ImageGeometry(), OdometryConfig())
@@ -175,7 +174,7 @@ def test_run_writes_a_map(synthetic_root: Path, tmp_path: Path) -> None:
     assert dataclasses.asdict(ImageGeometry()) == m.settings["image"]
 
 
-def test_localize_the_revisit_in_the_map(tiny_map: Map, tiny_loop: Sequence) -> None:
+def test_localize_the_revisit_in_the_map(tiny_map: Map, tiny_loop: RadarSequence) -> None:
     """The scans after the map's end drive its streets again: once relocalised, every scan near
     the map is placed within 1 m and 2 deg of GT (through the map's own GT alignment)."""
     localizer = Localizer(tiny_map, load_config("synthetic"))
@@ -215,7 +214,7 @@ def test_localize_command(
 
 
 @pytest.fixture(scope="module")
-def reverse_pair(synthetic_root: Path) -> tuple[Sequence, Sequence]:
+def reverse_pair(synthetic_root: Path) -> tuple[RadarSequence, RadarSequence]:
     """`synthetic/tiny_reverse_a` and `_b`: one block driven one way, then the other way round
     in the other lane in another session (reduced bins)."""
     return (
@@ -225,13 +224,13 @@ def reverse_pair(synthetic_root: Path) -> tuple[Sequence, Sequence]:
 
 
 @pytest.fixture(scope="module")
-def reverse_map(reverse_pair: tuple[Sequence, Sequence]) -> Map:
+def reverse_map(reverse_pair: tuple[RadarSequence, RadarSequence]) -> Map:
     a = reverse_pair[0]
     return build_map(Pipeline(a, load_config("synthetic")).run(), a)
 
 
 def test_reverse_session_localised_in_the_map(
-    reverse_map: Map, reverse_pair: tuple[Sequence, Sequence]
+    reverse_map: Map, reverse_pair: tuple[RadarSequence, RadarSequence]
 ) -> None:
     """Driving the map's street the other way round: relocalised (the 180-degree case) and
     tracked within 1 m and 2 deg of GT, through the map's own GT alignment."""
@@ -245,7 +244,7 @@ def test_reverse_session_localised_in_the_map(
 
 
 def test_reverse_session_joins_the_map(
-    reverse_map: Map, reverse_pair: tuple[Sequence, Sequence], tmp_path: Path
+    reverse_map: Map, reverse_pair: tuple[RadarSequence, RadarSequence], tmp_path: Path
 ) -> None:
     """The reverse session is tied to the map by verified inter-session loops, all true, and
     lands in the map's frame within 1 m ATE without re-alignment."""
@@ -270,7 +269,7 @@ def test_reverse_session_joins_the_map(
     assert len(again.sessions) == 2
 
 
-def test_a_session_elsewhere_never_meets_the_map(tiny: Sequence, oxford_dir: Path) -> None:
+def test_a_session_elsewhere_never_meets_the_map(tiny: RadarSequence, oxford_dir: Path) -> None:
     """A map of a real Oxford street and a simulated town: no inter-session loop is accepted,
     and the session is reported as such (its trajectory stays in its own frame)."""
     oxford = open_sequence(str(oxford_dir))

@@ -7,9 +7,8 @@ import logging
 import numpy as np
 import pytest
 
-from odometry.se2 import compose, inverse
 from radar_slam.errors import TrajectoryError
-from radar_slam.metrics import (
+from radar_slam.evaluation.metrics import (
     TrajectoryMetrics,
     align,
     associate,
@@ -22,6 +21,7 @@ from radar_slam.metrics import (
     umeyama_alignment_se2,
 )
 from radar_slam.trajectory import Trajectory
+from raplace.se2 import compose, inverse
 
 EXACT = 1e-9
 STEP_NS = 100_000_000  # 10 Hz
@@ -148,7 +148,7 @@ def test_constant_yaw_rate_drift_by_hand() -> None:
 
 
 def test_drift_undefined_below_100_m(caplog: pytest.LogCaptureFixture) -> None:
-    with caplog.at_level(logging.INFO, logger="radar_slam.metrics"):
+    with caplog.at_level(logging.INFO, logger="radar_slam.evaluation.metrics"):
         assert kitti_drift(straight(90), straight(90)) is None
     assert "shorter than the shortest segment" in caplog.text
     metrics = evaluate(straight(90), straight(90))

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry import OdometryError, se2
+from odometry import OdometryError
 from odometry.odometry import Odometry
 from radar_slam.datasets import OxfordSequence
 from radar_slam.datasets.frame import RadarFrame
+from raplace import se2
 
 pytestmark = pytest.mark.realdata
 

@@ -16,18 +16,19 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from odometry import OdometryConfig, estimate_motion, se2
+from odometry import OdometryConfig, estimate_motion
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry
 from radar_slam.datasets.frame import RadarFrame
-from radar_slam.datasets.synthetic import open_synthetic
-from radar_slam.metrics import kitti_drift
+from radar_slam.evaluation.metrics import kitti_drift
+from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import Scene, build_scene, generate_sequence, make_renderer
 from radar_slam.sim.render import RenderTables, render_scan
 from radar_slam.sim.scenarios import get_scenario
 from radar_slam.trajectory import Trajectory
+from raplace import se2
+from raplace.units import NS_PER_S
 
-NS_PER_S = 1_000_000_000
 SCAN_PERIOD_S = 0.25
 MAX_ERROR_M = 0.05  # the bars of issue 5
 MAX_ERROR_DEG = 0.1

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 from raplace_scenes import render_polar, synthetic_world
 
-from radar_slam.datasets import RadarFrame, Sequence
-from radar_slam.datasets.synthetic import open_synthetic
+from radar_slam.datasets import RadarFrame, RadarSequence
 from radar_slam.placerec import (
     NO_MATCH,
     BestMatches,
@@ -26,10 +25,12 @@ from radar_slam.placerec import (
     sweep_thresholds,
     with_exclusion,
 )
+from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import SCENARIOS
 from raplace.config import ExclusionConfig, RaPlaceConfig
 from raplace.retrieval import candidate_mask
+from raplace.units import NS_PER_S
 
 INF = float("inf")
 # Six queries with hand-counted outcomes: best-match distance, match within the criterion,
@@ -239,7 +240,7 @@ SMALL_EXCLUDE = 40
 
 
 @pytest.fixture(scope="module")
-def small_reverse(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
+def small_reverse(tmp_path_factory: pytest.TempPathFactory) -> RadarSequence:
     tiny = SCENARIOS["tiny"]
     scenario = replace(
         tiny,
@@ -254,14 +255,14 @@ def small_reverse(tmp_path_factory: pytest.TempPathFactory) -> Sequence:
     return open_synthetic(folder)
 
 
-def test_simulated_reverse_revisits(small_reverse: Sequence) -> None:
+def test_simulated_reverse_revisits(small_reverse: RadarSequence) -> None:
     """RaPlace finds the opposite-direction revisits that Scan Context mostly misses."""
     exclusion = ExclusionConfig(SMALL_EXCLUDE, 0.0)
     runs = method_runs(["raplace", "scancontext"], with_exclusion(RaPlaceConfig(), exclusion))
     frames = ((i, small_reverse[i]) for i in range(len(small_reverse)))
     results = match_intra_session(frames, runs)
     xy = small_reverse.ground_truth[:, :2]
-    times_s = small_reverse.timestamps_ns * 1e-9
+    times_s = small_reverse.timestamps_ns / NS_PER_S
     counts = intra_session_candidate_counts(times_s, exclusion)
     curves = {m: evaluate_matches(r, xy, xy, counts, 20.0) for m, r in results.items()}
     assert curves["raplace"].true_revisits >= 15

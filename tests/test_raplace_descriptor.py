@@ -61,7 +61,7 @@ def test_suppress_noise_removes_rings_and_near_range() -> None:
     polar[:, 120] += 80.0  # ring noise: same range at every azimuth
     polar[:, :10] = 255.0  # saturated near range
     polar[37, 60] += 100.0  # a real target
-    cfg = PreprocessConfig(subtract_bin_median=True, min_range_m=3.0)
+    cfg = PreprocessConfig(ring_noise_removal=True, min_range_m=3.0)
     clean = suppress_noise(polar, 0.5, cfg)
     assert clean[:, :6].max() == 0.0
     assert clean[:, 120].max() < 6.0
@@ -177,6 +177,8 @@ def test_coarse_descriptor_shape_and_normalisation(world: np.ndarray) -> None:
 
 
 def test_descriptor_rejects_frequencies_above_nyquist() -> None:
-    cfg = dataclasses.replace(CFG, max_freq_cpm=0.6)
-    with pytest.raises(RaPlaceError):
-        descriptor(np.zeros((16, 16), np.float32), 1.0, cfg)
+    with pytest.raises(ValueError, match="max_freq_cpm"):  # the config itself (issue 12)
+        dataclasses.replace(CFG, max_freq_cpm=0.6)
+    nyquist_cell_m = 0.5 / CFG.max_freq_cpm
+    with pytest.raises(RaPlaceError):  # an image coarser than the config's
+        descriptor(np.zeros((16, 16), np.float32), 2 * nyquist_cell_m, CFG)

@@ -15,9 +15,8 @@ from raplace.config import (
     RaPlaceConfig,
     RetrievalConfig,
     ScanContextConfig,
-    from_dict,
-    to_dict,
 )
+from raplace.config_io import from_dict, to_dict
 from raplace.descriptor import descriptor, z_normalise
 from raplace.retrieval import GrowingArray, PlaceRecognizer, candidate_mask
 from raplace.scancontext import ScanContextRecognizer

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from odometry import se2
+from raplace import se2
 
 
 def test_compose_known_answer() -> None:

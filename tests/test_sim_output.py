@@ -13,11 +13,10 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from odometry import se2
 from radar_slam.commands import simulate as simulate_command
 from radar_slam.datasets import MulRanSequence, open_sequence
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
-from radar_slam.datasets.synthetic import PARTIAL_SUFFIX, resolve_synthetic
+from radar_slam.sim.family import PARTIAL_SUFFIX, resolve_synthetic
 from radar_slam.sim.generate import build_scene, generate_sequence
 from radar_slam.sim.scenarios import TINY_BINS, get_scenario
 from radar_slam.sim.writer import (
@@ -27,6 +26,7 @@ from radar_slam.sim.writer import (
     STAMP_FILE,
     WORLD_FILE,
 )
+from raplace import se2
 
 TINY = get_scenario("tiny")
 FRAMES = 12

@@ -26,6 +26,7 @@ from radar_slam.sim.world import (
     concat_scatterers,
     point_scatterers,
 )
+from raplace.units import NS_PER_S
 
 N_BINS = 1200  # 71 m
 SENSOR = SensorConfig(n_bins=N_BINS)
@@ -147,7 +148,8 @@ def test_scan_rotated_by_90_deg_is_shifted_by_100_columns() -> None:
 
 def test_motion_distortion_renders_each_column_from_its_own_pose() -> None:
     speed, target = 10.0, np.array([[-20.0, 2.0]])  # a pole behind: seen mid-sweep
-    times = np.asarray(SENSOR.azimuth_offsets_ns(), float) / 1e9 + 0.25  # scan ends at t = 0.25 s
+    # The scan ends at t = 0.25 s.
+    times = np.asarray(SENSOR.azimuth_offsets_ns(), float) / NS_PER_S + 0.25
     poses = np.column_stack([speed * times, np.zeros(400), np.zeros(400)])
     world = assemble_world(point_scatterers(target, POINT_DB), NO_OCCLUDERS)
     tables_on = make_tables(SENSOR, QUIET)

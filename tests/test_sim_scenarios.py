@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from odometry import se2
 from radar_slam.errors import RadarSlamError
 from radar_slam.sim.generate import Scene, build_scene
 from radar_slam.sim.physics import PhysicsConfig
@@ -17,6 +16,7 @@ from radar_slam.sim.render import make_tables, render_scan
 from radar_slam.sim.scenarios import GROUPS, SCENARIOS, expand, get_scenario
 from radar_slam.sim.sensor import SensorConfig
 from radar_slam.sim.world import KIND, Occluders, assemble_world, point_scatterers
+from raplace import se2
 
 SAMPLE_S = 0.25
 SPEED_BAND_MPS = (4.5, 15.5)  # 5-15 m/s, with a margin for the sampling

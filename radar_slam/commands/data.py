@@ -9,24 +9,18 @@ import numpy as np
 import typer
 from numpy.typing import NDArray
 
-from radar_slam.datasets import RadarFrame, Sequence, data_root, families, open_sequence
+from radar_slam.commands.options import DATA_ROOT_OPTION
+from radar_slam.datasets import RadarFrame, RadarSequence, data_root, families, open_sequence
 from radar_slam.datasets.registry import family_folder
 from radar_slam.errors import RadarSlamError
+from raplace.units import NS_PER_MS, NS_PER_S
 
-NS_PER_S = 1e9
-NS_PER_MS = 1e6
 AZIMUTH_SPACING_TOLERANCE = 0.1
 """Largest deviation of one azimuth step from the mean step, as a fraction of the mean."""
 FULL_TURN_TOLERANCE_RAD = np.deg2rad(5.0)
 """How far n_azimuths * mean step may be from 360 deg before the sweep is flagged."""
 MAX_SWEEP_PERIODS = 2.0
 """A sweep whose azimuth times span more than this many frame periods is flagged."""
-
-DATA_ROOT_OPTION = typer.Option(
-    None,
-    "--data-root",
-    help="Folder holding <family>/<sequence> folders (default: $RADAR_SLAM_DATA, else ./data).",
-)
 
 
 @dataclass(frozen=True)
@@ -54,7 +48,7 @@ def list_sequences(root: Path) -> list[SequenceListing]:
         if not folder.is_dir():
             continue
         for child in sorted(folder.iterdir()):
-            if not (child.is_dir() and family.detect(child)):
+            if not ((child.is_dir() or child.is_file()) and family.detect(child)):  # bag files
                 continue
             spec = f"{name}/{child.name}"
             try:
@@ -107,7 +101,7 @@ def trajectory_length_m(poses: NDArray[np.float64]) -> float:
     return float(np.nansum(steps))
 
 
-def describe_sequence(sequence: Sequence, spec: str) -> list[str]:
+def describe_sequence(sequence: RadarSequence, spec: str) -> list[str]:
     """Human-readable lines describing `sequence` (reads its first scan and its GT)."""
     frame = sequence[0]
     stamps = sequence.timestamps_ns

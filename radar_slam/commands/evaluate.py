@@ -8,8 +8,8 @@ from pathlib import Path
 
 import typer
 
-from radar_slam.errors import ResultsError
-from radar_slam.metrics import (
+from radar_slam.errors import TrajectoryError
+from radar_slam.evaluation.metrics import (
     DEFAULT_MAX_TIME_DIFF_NS,
     DEFAULT_RPE_DELTA,
     KITTI_SEGMENT_LENGTHS_M,
@@ -17,9 +17,10 @@ from radar_slam.metrics import (
     TrajectoryMetrics,
     evaluate,
 )
+from radar_slam.results import check_output_file, write_text_atomically
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
+from raplace.units import NS_PER_MS
 
-NS_PER_MS = 1_000_000
 MISSING = "n/a"
 TABLE_COLUMNS = (
     ("poses", "poses_matched", "{:d}"),
@@ -76,6 +77,10 @@ def metrics_json(results: dict[str, TrajectoryMetrics]) -> dict[str, object]:
     return {name: metrics.to_dict() for name, metrics in results.items()}
 
 
+MAX_DIFF_MS = 1e9
+"""Upper bound of --max-diff-ms (rejects inf, which has no nanosecond count)."""
+
+
 def eval_command(
     trajectories: list[Path] = typer.Argument(
         ...,
@@ -100,6 +105,7 @@ def eval_command(
         DEFAULT_MAX_TIME_DIFF_NS / NS_PER_MS,
         "--max-diff-ms",
         min=0.0,
+        max=MAX_DIFF_MS,
         help="TUM association tolerance between timestamps, in milliseconds.",
     ),
 ) -> None:
@@ -112,8 +118,8 @@ def eval_command(
         raise typer.BadParameter(
             "give at least one estimate and the ground truth", param_hint="TRAJECTORIES"
         )
-    if json_path is not None and json_path.exists() and not force:
-        raise ResultsError(f"{json_path}: file exists; pass --force to overwrite it")
+    if json_path is not None:
+        check_output_file(json_path, "--json", force)
     *est_paths, gt_path = trajectories
     formats = [
         detect_format(p) if fmt == TrajectoryFormat.auto else fmt.value for p in trajectories
@@ -125,13 +131,16 @@ def eval_command(
         trajectory_names(est_paths), est_paths, formats[:-1], strict=True
     ):
         est: Trajectory = read_trajectory(path, path_fmt)
-        results[name] = evaluate(
-            est,
-            gt,
-            by=association,
-            max_diff_ns=round(max_diff_ms * NS_PER_MS),
-            rpe_delta=rpe_delta,
-        )
+        try:
+            results[name] = evaluate(
+                est,
+                gt,
+                by=association,
+                max_diff_ns=round(max_diff_ms * NS_PER_MS),
+                rpe_delta=rpe_delta,
+            )
+        except TrajectoryError as exc:  # name the files (issue 12)
+            raise TrajectoryError(f"{path} against {gt_path}: {exc}") from None
     typer.echo(
         f"ground truth: {gt_path} ({len(gt)} poses, {gt.length_m():.1f} m); "
         f"association by {association}; RPE over {rpe_delta} frame(s)"
@@ -143,7 +152,7 @@ def eval_command(
             f"{min(KITTI_SEGMENT_LENGTHS_M):.0f} m between matched poses; shown as n/a"
         )
     if json_path is not None:
-        json_path.write_text(json.dumps(metrics_json(results), indent=2) + "\n")
+        write_text_atomically(json_path, json.dumps(metrics_json(results), indent=2) + "\n")
         typer.echo(f"wrote {json_path}")
 
 

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import typer
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
-from radar_slam.commands.run import progress_bar
+from radar_slam.commands.options import DATA_ROOT_OPTION, progress_bar
 from radar_slam.errors import ResultsError
 from radar_slam.g2o import read_g2o, write_pose_graph
 from radar_slam.pipeline import close_loops_on_graph, open_configured
+from radar_slam.results import check_output_file
 
 
 def loops_command(
@@ -39,8 +39,7 @@ def loops_command(
     data_root: Path | None = DATA_ROOT_OPTION,
 ) -> None:
     """Add verified radar loop closures to a pose graph from another odometry and optimise it."""
-    if out.exists() and not force:
-        raise ResultsError(f"{out}: file exists; pass --force to overwrite it")
+    check_output_file(out, "--out", force)
     if out.resolve() == graph.resolve():
         raise ResultsError(f"{out}: would overwrite the input graph; choose another --out")
     record = read_g2o(graph)
@@ -50,7 +49,7 @@ def loops_command(
     write_pose_graph(out, run.graph)
     typer.echo(
         f"{seq.family}/{seq.name}: {len(record.vertices)} vertices, {len(record.edges)} edges in; "
-        f"{len(run.loops)} verified loop proposals, {run.accepted} accepted; "
+        f"{len(run.loops)} verified loop proposals, {run.n_accepted} accepted; "
         f"{run.seconds:.1f} s"
     )
     typer.echo(f"wrote {out}")

@@ -14,15 +14,19 @@ from pathlib import Path
 import typer
 from tqdm import tqdm
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
-from radar_slam.commands.run import CONFIG_OPTION, MAX_FRAMES_OPTION, OUT_OPTION, check_out
+from radar_slam.commands.options import (
+    CONFIG_OPTION,
+    DATA_ROOT_OPTION,
+    MAX_FRAMES_OPTION,
+    OUT_OPTION,
+)
 from radar_slam.config import write_yaml
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import Map
 from radar_slam.maps.localizer import Localization, Localizer
 from radar_slam.maps.writers import localization_summary, map_info, write_localization
 from radar_slam.pipeline import frame_count, ground_truth_of, open_configured, sequence_label
-from radar_slam.results import result_dir
+from radar_slam.results import check_output_root, check_result_location, write_result_dir
 
 MAP_OPTION = typer.Option(
     ..., "--map", help="A map folder (the map/ of a `radar-slam run` result).", file_okay=False
@@ -40,9 +44,10 @@ def localize_command(
 ) -> None:
     """Localise every scan of SEQ in MAP: global relocalisation, then tracking; writes
     localization.tum/.csv, a plot and, with ground truth, metrics.json."""
-    check_out(out)
+    check_output_root(out)
     the_map = Map.load(map_path)
     seq, settings = open_configured(sequence, data_root, config)
+    check_result_location(seq.family, f"{seq.name}_localize", out)  # before the work
     total = frame_count(seq, max_frames)
     localizer = Localizer(the_map, settings)
     fixes: list[Localization] = []
@@ -54,9 +59,12 @@ def localize_command(
     seconds = time.perf_counter() - start
     gt_poses, _ = ground_truth_of(seq, total)
     metrics = None if gt_poses is None else evaluate_localization(fixes, gt_poses, the_map)
-    folder = result_dir(seq.family, f"{seq.name}_localize", out)
-    write_yaml(settings, folder / "config.yaml")
-    write_localization(folder, sequence_label(seq), the_map, fixes, seconds, metrics)
+
+    def write(folder: Path) -> None:
+        write_yaml(settings, folder / "config.yaml")
+        write_localization(folder, sequence_label(seq), the_map, fixes, seconds, metrics)
+
+    folder = write_result_dir(seq.family, f"{seq.name}_localize", write, out)
     typer.echo(localization_summary(sequence_label(seq), fixes, seconds, metrics), nl=False)
     typer.echo(f"results in {folder}")
 

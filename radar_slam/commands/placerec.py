@@ -28,9 +28,9 @@ import typer
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
+from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.config import merge, read_yaml, write_yaml
-from radar_slam.datasets import RadarFrame, Sequence, open_sequence
+from radar_slam.datasets import RadarFrame, RadarSequence, open_sequence
 from radar_slam.placerec import (
     DEFAULT_CRITERION_M,
     DEFAULT_EXCLUDE_RECENT,
@@ -49,15 +49,15 @@ from radar_slam.placerec import (
     with_exclusion,
 )
 from radar_slam.plots import plot_pr_curves
-from radar_slam.results import result_dir
+from radar_slam.results import check_output_root, write_result_dir
 from raplace.config import ExclusionConfig, RaPlaceConfig
+from raplace.units import NS_PER_S
 
 log = logging.getLogger(__name__)
 
 RESULTS_FAMILY = "pr"
 MATCHES_HEADER = ("method", "query_ns", "match_ns", "distance")
 METHOD_LABELS = {"raplace": "RaPlace", "scancontext": "Scan Context"}
-NS_PER_S = 1e-9
 NUMBER_LIST = re.compile(r"\[\s*([-+0-9.eE,\snul]*?)\s*\]")
 """A JSON list holding only numbers (and null), as json.dumps(indent=...) spreads it."""
 WHITESPACE = re.compile(r"\s+")
@@ -85,7 +85,7 @@ class EvaluatedFrames:
         timestamps_ns: (n,) frame times [ns].
     """
 
-    sequence: Sequence
+    sequence: RadarSequence
     indices: NDArray[np.int64]
     xy: NDArray[np.float64]
     timestamps_ns: NDArray[np.int64]
@@ -96,16 +96,21 @@ class EvaluatedFrames:
     def frames(self, description: str) -> Iterator[tuple[int, RadarFrame]]:
         """(evaluated index, frame), loaded lazily, with a frames/s progress bar on stderr."""
         for position in tqdm(
-            range(len(self)), desc=description, unit="frame", dynamic_ncols=True, leave=False
+            range(len(self)),
+            desc=description,
+            unit="frame",
+            dynamic_ncols=True,
+            leave=False,
+            disable=None,
         ):
             yield position, self.sequence[int(self.indices[position])]
 
 
-def spec_name(sequence: Sequence) -> str:
+def spec_name(sequence: RadarSequence) -> str:
     return f"{sequence.family}/{sequence.name}"
 
 
-def evaluated_frames(sequence: Sequence, max_frames: int | None) -> EvaluatedFrames:
+def evaluated_frames(sequence: RadarSequence, max_frames: int | None) -> EvaluatedFrames:
     """The first `max_frames` frames of `sequence` that have a ground-truth pose.
 
     Raises:
@@ -222,6 +227,10 @@ def warn_overridden_exclusion(cfg: RaPlaceConfig, exclusion: ExclusionConfig) ->
             )
 
 
+MAX_OPTION_VALUE = 1e9
+"""Upper bound of the distance [m] and time [s] options (rejects inf, which JSON cannot hold)."""
+
+
 def pr_command(
     sequence_spec: str = typer.Argument(
         ..., metavar="SEQ", help="Query sequence: family/sequence or a folder path."
@@ -237,6 +246,7 @@ def pr_command(
         DEFAULT_CRITERION_M,
         "--criterion",
         min=0.0,
+        max=MAX_OPTION_VALUE,
         help="Revisit criterion: a match is true within this distance [m] (10/20/50 in papers).",
     ),
     exclude_recent: int = typer.Option(
@@ -249,6 +259,7 @@ def pr_command(
         0.0,
         "--exclude-seconds",
         min=0.0,
+        max=MAX_OPTION_VALUE,
         help="Intra-session: frames less than this many seconds older are excluded too.",
     ),
     out: Path | None = typer.Option(
@@ -263,6 +274,7 @@ def pr_command(
     ),
 ) -> None:
     """Precision-recall of loop detection (intra-session) or relocalisation (--map)."""
+    check_output_root(out)
     cfg = load_config(config_path)
     query = evaluated_frames(open_sequence(sequence_spec, data_root), max_frames)
     if map_spec is None:
@@ -275,8 +287,9 @@ def pr_command(
         warn_overridden_exclusion(cfg, exclusion)
     cfg = with_exclusion(cfg, exclusion)
     evaluation = run_evaluation(query, reference, method.methods(), cfg, criterion_m)
-    folder = result_dir(RESULTS_FAMILY, evaluation.folder_name, out)
-    write_results(folder, evaluation, cfg)
+    folder = write_result_dir(
+        RESULTS_FAMILY, evaluation.folder_name, lambda f: write_results(f, evaluation, cfg), out
+    )
     typer.echo(evaluation.header)
     typer.echo(format_table(evaluation.curves, evaluation.matches))
     typer.echo(f"wrote {folder}")
@@ -359,7 +372,7 @@ def run_evaluation(
     mode: Mode
     if reference is None:
         matches = match_intra_session(query.frames(f"pr {label}"), runs)
-        times_s = query.timestamps_ns.astype(np.float64) * NS_PER_S
+        times_s = query.timestamps_ns.astype(np.float64) / NS_PER_S
         counts = intra_session_candidate_counts(times_s, exclusion)
         map_frames, mode = query, "intra"
     else:

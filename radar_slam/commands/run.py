@@ -8,15 +8,24 @@ summary. The files are listed in `radar_slam.outputs`.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import typer
-from tqdm import tqdm
 
-from radar_slam.commands.data import DATA_ROOT_OPTION
-from radar_slam.errors import ResultsError
+from radar_slam.commands.bag_options import (
+    GT_TOPIC_OPTION,
+    LAYOUT_OPTION,
+    TOPIC_OPTION,
+    reopen_with_bag_options,
+)
+from radar_slam.commands.options import (
+    CONFIG_OPTION,
+    DATA_ROOT_OPTION,
+    MAX_FRAMES_OPTION,
+    OUT_OPTION,
+    progress_bar,
+)
+from radar_slam.datasets.stride import strided
 from radar_slam.maps.build import build_map  # issue-13: every run writes map/
 from radar_slam.maps.format import Map, write_map  # issue-13
 from radar_slam.maps.session import join_session  # issue-13: run --map
@@ -30,31 +39,19 @@ from radar_slam.outputs import (
 from radar_slam.pipeline import (
     Pipeline,
     PipelineConfig,
-    Progress,
-    ProgressCallback,
     frame_count,
     open_configured,
     run_odometry,
 )
-from radar_slam.results import result_dir
+from radar_slam.results import check_output_root, check_result_location, write_result_dir
+from radar_slam.viewer import RerunViewer, import_rerun
 
 MAP_FOLDER = "map"
 """The map every SLAM run writes into its result folder (`radar_slam.maps`, issue-13)."""
 SEQUENCE_ARGUMENT = typer.Argument(
-    ..., help="Sequence: family/name (mulran/KAIST01, oxford/..., synthetic/loop) or a folder."
-)
-OUT_OPTION = typer.Option(
-    None,
-    "--out",
-    help="Result folder (must be absent or empty); default results/<family>_<seq>/<timestamp>/.",
-    file_okay=False,
-)
-CONFIG_OPTION = typer.Option(
-    None,
-    "--config",
-    help="YAML overrides applied on top of the defaults and configs/<family>.yaml.",
-    exists=True,
-    dir_okay=False,
+    ...,
+    help="Sequence: family/name (mulran/KAIST01, oxford/..., boreas/..., radiate/..., "
+    "synthetic/loop), a folder, a ROS 1 .bag or a ROS 2 bag folder.",
 )
 MAP_OPTION = typer.Option(
     None,
@@ -62,30 +59,15 @@ MAP_OPTION = typer.Option(
     help="Extend this map (a run's map/): multi-session SLAM in the map's frame (issue-13).",
     file_okay=False,
 )
-MAX_FRAMES_OPTION = typer.Option(
-    None, "--max-frames", min=1, help="Process only the first N scans."
+VIEWER_OPTION = typer.Option(  # issue-14
+    None,
+    "--viewer",
+    help="Stream the run to Rerun: --viewer spawns the viewer, --viewer FILE.rrd saves a "
+    "recording (needs the viewer extra: pip install 'radar-slam[viewer]').",
 )
-
-
-@contextmanager
-def progress_bar(total: int, description: str, loops: bool = True) -> Iterator[ProgressCallback]:
-    """A tqdm bar (frames/s, and loops accepted/rejected) driven by pipeline `Progress` reports."""
-    with tqdm(total=total, desc=description, unit="frame", dynamic_ncols=True) as bar:
-
-        def update(progress: Progress) -> None:
-            bar.update(progress.done - bar.n)
-            if loops:
-                bar.set_postfix(
-                    loops=progress.loops_accepted, rejected=progress.loops_rejected, refresh=False
-                )
-
-        yield update
-
-
-def check_out(out: Path | None) -> None:
-    """Fail before any work when `--out` exists and is not an empty folder."""
-    if out is not None and out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise ResultsError(f"{out}: output folder exists and is not empty; choose another --out")
+STRIDE_OPTION = typer.Option(  # issue 10: strided view of the sequence
+    1, "--stride", min=1, help="Use every K-th scan (4 Hz data at --stride 4 is 1 Hz)."
+)
 
 
 def without_loops(config: PipelineConfig) -> PipelineConfig:
@@ -99,29 +81,50 @@ def run_command(
     out: Path | None = OUT_OPTION,
     config: Path | None = CONFIG_OPTION,
     max_frames: int | None = MAX_FRAMES_OPTION,
+    stride: int = STRIDE_OPTION,
     no_loops: bool = typer.Option(
         False, "--no-loops", help="Odometry and pose graph only, no loop closing."
     ),
     data_root: Path | None = DATA_ROOT_OPTION,
+    topic: str | None = TOPIC_OPTION,  # issue-14: ROS bag input and live viewer
+    gt_topic: str | None = GT_TOPIC_OPTION,
+    layout: str | None = LAYOUT_OPTION,
+    viewer: str | None = VIEWER_OPTION,
     map_path: Path | None = MAP_OPTION,  # issue-13
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
-    check_out(out)
+    check_output_root(out)
+    if viewer is not None:  # fail before any work when rerun-sdk is missing
+        import_rerun()
     prior_map = None if map_path is None else Map.load(map_path)  # issue-13
     seq, settings = open_configured(sequence, data_root, config)
+    seq, settings = reopen_with_bag_options(
+        sequence, data_root, seq, settings, topic, gt_topic, layout
+    )
+    seq = strided(seq, stride)
+    check_result_location(seq.family, seq.name, out)  # before the run, not after it
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
+    observer = None if viewer is None else RerunViewer(viewer, f"{seq.family}/{seq.name}")
     with progress_bar(total, f"{seq.family}/{seq.name}") as update:
-        results = Pipeline(seq, settings, max_frames=max_frames, progress=update).run()
+        results = Pipeline(
+            seq, settings, max_frames=max_frames, progress=update, observer=observer
+        ).run()
     joined = None if prior_map is None else join_session(results, seq, prior_map)  # issue-13
     results = results if joined is None else joined.results  # issue-13: in the map's frame
-    folder = result_dir(seq.family, seq.name, out)
-    write_results(folder, results)
-    write_map(folder / MAP_FOLDER, build_map(results, seq) if joined is None else joined.map)
+    joined_text: list[str] = []
+
+    def write(folder: Path) -> None:
+        write_results(folder, results)
+        the_map = build_map(results, seq) if joined is None else joined.map  # issue-13
+        write_map(folder / MAP_FOLDER, the_map)
+        if joined is not None:
+            joined_text.append(write_joined(folder, joined))
+
+    folder = write_result_dir(seq.family, seq.name, write, out)
     typer.echo(slam_summary(results), nl=False)
-    if joined is not None:  # issue-13
-        typer.echo(write_joined(folder, joined), nl=False)
+    typer.echo("".join(joined_text), nl=False)  # issue-13: run --map
     typer.echo(f"results in {folder}")
 
 
@@ -130,17 +133,25 @@ def odometry_command(
     out: Path | None = OUT_OPTION,
     config: Path | None = CONFIG_OPTION,
     max_frames: int | None = MAX_FRAMES_OPTION,
+    stride: int = STRIDE_OPTION,
     data_root: Path | None = DATA_ROOT_OPTION,
+    topic: str | None = TOPIC_OPTION,  # issue-14: ROS bag input
+    gt_topic: str | None = GT_TOPIC_OPTION,
+    layout: str | None = LAYOUT_OPTION,
 ) -> None:
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
-    check_out(out)
+    check_output_root(out)
     seq, settings = open_configured(sequence, data_root, config)
+    seq, settings = reopen_with_bag_options(
+        sequence, data_root, seq, settings, topic, gt_topic, layout
+    )
+    seq = strided(seq, stride)
+    check_result_location(seq.family, seq.name, out)
     total = frame_count(seq, max_frames)
     with progress_bar(total, f"{seq.family}/{seq.name}", loops=False) as update:
         run = run_odometry(seq, settings, max_frames=max_frames, progress=update)
-    folder = result_dir(seq.family, seq.name, out)
-    write_odometry_results(folder, run)
+    folder = write_result_dir(seq.family, seq.name, lambda f: write_odometry_results(f, run), out)
     typer.echo(odometry_summary(run), nl=False)
     typer.echo(f"results in {folder}")
 

@@ -18,9 +18,10 @@ period is the gap to the previous radar stamp, or 250 ms when that gap is implau
 
 Ground truth: `global_pose.csv` holds the vehicle BASE pose in MulRan's UTM-like world frame. It
 is interpolated to each scan time (x, y linearly; yaw linearly after unwrapping) and the radar
-mounting `MULRAN_T_BASE_RADAR` is applied: T_world_radar = T_world_base * T_base_radar. Scans
-up to 0.5 s outside the GT time span take the nearest end pose; scans further out get NaN poses
-and a logged warning.
+mounting `MULRAN_T_BASE_RADAR` is applied: T_world_radar = T_world_base * T_base_radar. A scan
+at most one GT sample period (the median gap of global_pose.csv) outside the GT time span takes
+the nearest end pose; scans further out have no ground truth (NaN poses, one logged warning):
+ground truth is never stretched over a part of the drive it does not cover.
 """
 
 from __future__ import annotations
@@ -33,9 +34,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import se2
 from radar_slam.datasets._io import (
     check_strictly_increasing,
+    frame_index,
     list_stamped_files,
     parse_navtech_header,
     read_gray_png,
@@ -55,6 +56,8 @@ from radar_slam.datasets.navtech import (
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from raplace import se2
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
@@ -76,12 +79,12 @@ GLOBAL_POSE_COLUMNS = 13
 GP_COL_R00, GP_COL_X, GP_COL_R10, GP_COL_Y = 1, 4, 5, 8
 STAMP_FILES = ("sensor_data/navtech_top_stamp.csv", "navtech_top_stamp.csv")
 
-NOMINAL_SCAN_PERIOD_NS = int(round(1e9 / SCAN_RATE_HZ))
+NOMINAL_SCAN_PERIOD_NS = int(round(NS_PER_S / SCAN_RATE_HZ))
 """One revolution at 4 Hz [ns]: the scan period used when stamps cannot tell it."""
 SCAN_PERIOD_TOLERANCE = 0.2
 """A gap between radar stamps counts as one scan period if within +-20 % of the nominal one."""
 GT_CLAMP_NS = 500_000_000
-"""Scans at most this far outside the GT time span take the end pose; further out get NaN."""
+"""Upper bound of the tolerance outside the GT time span (one GT sample period, at most this)."""
 
 MULRAN_LAYOUT = (
     "<root>/mulran/<SEQ>/sensor_data/radar/polar/<t_ns>.png (also <SEQ>/radar/polar/, "
@@ -173,7 +176,7 @@ def read_global_pose(path: Path) -> tuple[NDArray[np.int64], NDArray[np.float64]
         DatasetFormatError: wrong column count, non-numeric or NaN entries, unsorted or
             duplicated times.
     """
-    ints, values = read_numeric_table(path, GLOBAL_POSE_COLUMNS, int_columns=(0,))
+    ints, values = read_numeric_table(path, GLOBAL_POSE_COLUMNS, int_columns=(0,), header_rows=1)
     times = ints[:, 0]
     check_strictly_increasing(times, path, "timestamp")
     yaw = np.arctan2(values[:, GP_COL_R10], values[:, GP_COL_R00])
@@ -185,7 +188,7 @@ def interpolate_poses(
     times_ns: NDArray[np.int64],
     poses: NDArray[np.float64],
     query_ns: NDArray[np.int64],
-    clamp_ns: int = GT_CLAMP_NS,
+    clamp_ns: int | None = None,
 ) -> NDArray[np.float64]:
     """Interpolate SE(2) poses to query times.
 
@@ -197,11 +200,14 @@ def interpolate_poses(
         times_ns: (N,) strictly increasing pose times [ns].
         poses: (N, 3) poses (x, y, yaw).
         query_ns: (M,) times to interpolate at [ns].
-        clamp_ns: how far outside the span a query may still be clamped [ns].
+        clamp_ns: how far outside the span a query may still be clamped [ns]; default one
+            sample period (the median gap of `times_ns`), at most `GT_CLAMP_NS`.
 
     Returns:
         (M, 3) interpolated poses, yaw wrapped to [-pi, pi).
     """
+    if clamp_ns is None:
+        clamp_ns = gt_tolerance_ns(times_ns)
     origin = times_ns[0]
     t = (times_ns - origin).astype(np.float64)
     q = (query_ns - origin).astype(np.float64)
@@ -216,26 +222,35 @@ def interpolate_poses(
     return result
 
 
+def gt_tolerance_ns(times_ns: NDArray[np.int64]) -> int:
+    """How far outside the GT time span a scan still takes the end pose: one GT sample period
+    (the median gap), at most `GT_CLAMP_NS` [ns]."""
+    if len(times_ns) < 2:
+        return 0
+    return int(min(GT_CLAMP_NS, np.median(np.diff(times_ns))))
+
+
 def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
     """T_world_radar (N, 3) at each scan time, from `global_pose.csv` (NaN rows outside GT)."""
     times, base_poses = read_global_pose(gt_path)
-    base_at_scans = interpolate_poses(times, base_poses, scan_stamps_ns)
+    tolerance_ns = gt_tolerance_ns(times)
+    base_at_scans = interpolate_poses(times, base_poses, scan_stamps_ns, tolerance_ns)
     missing = int(np.isnan(base_at_scans[:, 0]).sum())
     if missing:
         logger.warning(
-            "%s: %d of %d scans lie more than %.1f s outside its time span; their ground truth "
-            "is NaN",
+            "%s: %d of %d scans lie more than %.3f s (one GT period) outside its time span; "
+            "they have no ground truth",
             gt_path,
             missing,
             len(scan_stamps_ns),
-            GT_CLAMP_NS / 1e9,
+            tolerance_ns / NS_PER_S,
         )
     return se2.compose(base_at_scans, MULRAN_T_BASE_RADAR)
 
 
 def _read_stamp_list(path: Path) -> NDArray[np.int64]:
     """Read navtech_top_stamp.csv: one t_ns per line, strictly increasing."""
-    ints, _ = read_numeric_table(path, 1, int_columns=(0,))
+    ints, _ = read_numeric_table(path, 1, int_columns=(0,), header_rows=1)
     stamps = ints[:, 0]
     check_strictly_increasing(stamps, path, "timestamp")
     return stamps
@@ -250,6 +265,7 @@ class MulRanSequence:
         range_resolution_m: size of one bin [m].
         family: family name reported by the sequence (a generator writing MulRan layout may pass
             its own).
+        azimuth_offset_rad: added to every azimuth [rad, CCW] (the `dataset:` config section).
 
     Raises:
         DatasetNotFoundError: `folder` does not exist.
@@ -263,6 +279,7 @@ class MulRanSequence:
         n_bins: int = MULRAN_N_BINS,
         range_resolution_m: float = MULRAN_RANGE_RESOLUTION_M,
         family: str = MULRAN_FAMILY,
+        azimuth_offset_rad: float = 0.0,
     ) -> None:
         folder = Path(folder)
         if not folder.is_dir():
@@ -280,6 +297,7 @@ class MulRanSequence:
         self.scan_folder = scans
         self.n_bins = n_bins
         self.range_resolution_m = range_resolution_m
+        self.azimuth_offset_rad = float(azimuth_offset_rad)
         self._paths = paths
         self._stamps = stamps
         self._stamps.flags.writeable = False
@@ -317,9 +335,7 @@ class MulRanSequence:
             IndexError: index out of range.
             DatasetFormatError: unreadable PNG or wrong shape.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         path = self._paths[index]
         stamp = int(self._stamps[index])
         if self.scan_folder.oxford_form:
@@ -338,7 +354,7 @@ class MulRanSequence:
         return RadarFrame(
             timestamp_ns=stamp,
             polar=polar,
-            azimuths_rad=azimuths,
+            azimuths_rad=azimuths + self.azimuth_offset_rad,
             range_resolution_m=self.range_resolution_m,
             sensor=MULRAN_SENSOR,
             azimuth_times_ns=azimuth_times,
@@ -353,8 +369,8 @@ class MulRanSequence:
     def ground_truth(self) -> NDArray[np.float64] | None:
         """(N, 3) T_world_radar (x, y, yaw) at each scan time, MulRan world frame; None without GT.
 
-        Read and interpolated on first access. Rows are NaN for scans more than 0.5 s outside
-        the GT time span.
+        Read and interpolated on first access. Rows are NaN for scans more than one GT sample
+        period outside the GT time span.
         """
         if self.gt_path is None:
             return None

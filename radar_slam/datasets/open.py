@@ -1,4 +1,4 @@
-"""Resolve a sequence spec (`family/sequence` or a folder path) to an opened Sequence."""
+"""Resolve a sequence spec (`family/sequence` or a folder path) to an opened RadarSequence."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 
 from radar_slam.datasets import registry
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.registry import (
     DatasetConfig,
     Family,
@@ -14,7 +14,7 @@ from radar_slam.datasets.registry import (
     families,
     family_folder,
 )
-from radar_slam.errors import DatasetNotFoundError
+from radar_slam.errors import ConfigError, DatasetNotFoundError
 
 SPEC_SEPARATOR = "/"
 
@@ -29,11 +29,22 @@ def _split_family_spec(spec: str) -> tuple[Family, str] | None:
 
 
 def _layouts_and_sources(selected: list[Family]) -> str:
-    """Expected layout and download address of each family, for error messages."""
-    return "\n".join(
-        f"  {family.name}: expected {family.layout}\n    obtain it from {family.obtain}"
+    """Expected layout and download address of each family, on one line (error messages)."""
+    return "; ".join(
+        f"{family.name}: expected {family.layout}, obtained from {family.obtain}"
         for family in selected
     )
+
+
+def _open_with(family: Family, path: Path, options: dict[str, object]) -> RadarSequence:
+    """`family.open(path, **options)`, refusing options the family does not take."""
+    foreign = sorted(set(options) - set(family.options))
+    if foreign:
+        raise ConfigError(
+            f"dataset.{foreign[0]} does not apply to the {family.name} family (it takes: "
+            f"{', '.join(family.options)})"
+        )
+    return family.open(path, **options)
 
 
 def sequence_folder(root: Path, family: Family, sequence: str) -> Path:
@@ -47,7 +58,7 @@ def open_sequence(
     spec: str | os.PathLike[str],
     data_root: str | os.PathLike[str] | None = None,
     options: DatasetConfig | None = None,
-) -> Sequence:
+) -> RadarSequence:
     """Open a sequence named `family/sequence` or given as a path to its folder.
 
     `family/sequence` resolves to `<root>/<family>/<sequence>` (family folder matched
@@ -73,16 +84,16 @@ def open_sequence(
         family, sequence = named
         candidates = [family]
         folder = sequence_folder(root, family, sequence)
-        if folder.is_dir():
-            return family.open(folder, **loader_options)
+        if folder.is_dir() or (folder.is_file() and family.detect(folder)):  # file: a ROS 1 bag
+            return _open_with(family, folder, loader_options)
         looked_in.append(folder.absolute())
     path = Path(spec).expanduser()
-    if path.is_dir():
+    if path.is_dir() or path.is_file():  # a file: a recording such as a ROS 1 bag
         detected = detect_family(path)
         if detected is not None:
-            return detected.open(path, **loader_options)
+            return _open_with(detected, path, loader_options)
         raise DatasetNotFoundError(
-            f"{path} exists but matches no known dataset layout; expected one of:\n"
+            f"{path} exists but matches no known dataset layout; expected one of: "
             f"{_layouts_and_sources(candidates)}"
         )
     looked_in.append(path.absolute())
@@ -92,12 +103,11 @@ def open_sequence(
                 continue
             folder = family_folder(root, family.name) / spec.strip(SPEC_SEPARATOR)
             if folder.is_dir() and family.detect(folder):
-                return family.open(folder, **loader_options)
+                return _open_with(family, folder, loader_options)
             looked_in.append(folder.absolute())
-    places = "\n".join(f"  {place}" for place in dict.fromkeys(looked_in))
+    places = ", ".join(str(place) for place in dict.fromkeys(looked_in))
     known = ", ".join(sorted(families())) or "none registered"
-    raise DatasetNotFoundError(
-        f"sequence {str(spec)!r} not found (data root {root}; families: {known}). Looked in:\n"
-        f"{places}\nExpected layout and where to get the data:\n"
-        f"{_layouts_and_sources(candidates)}"
+    raise DatasetNotFoundError(  # one line (issue 12), however long
+        f"sequence {str(spec)!r} not found (data root {root}; families: {known}); looked in "
+        f"{places}; {_layouts_and_sources(candidates)}"
     )

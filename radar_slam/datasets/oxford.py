@@ -30,11 +30,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import se2
 from radar_slam.datasets._io import (
     check_strictly_increasing,
+    decode_oxford_form,
+    frame_index,
     list_stamped_files,
-    parse_navtech_header,
     read_gray_png,
     read_numeric_table,
 )
@@ -45,10 +45,11 @@ from radar_slam.datasets.navtech import (
     OXFORD_N_BINS,
     OXFORD_RANGE_RESOLUTION_M,
     SCAN_RATE_HZ,
-    encoder_to_azimuth_ccw,
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from raplace import se2
+from raplace.units import NS_PER_US, US_PER_S
 
 logger = logging.getLogger(__name__)
 
@@ -65,8 +66,7 @@ destination_radar_timestamp."""
 COL_SOURCE_TIME, COL_X, COL_Y, COL_YAW = 0, 2, 3, 7
 ODOMETRY_INT_COLUMNS = (0, 8, 9)
 """Integer columns read exactly: source_timestamp, source_radar_ts, destination_radar_ts."""
-NS_PER_US = 1000
-NOMINAL_SCAN_PERIOD_US = int(round(1e6 / SCAN_RATE_HZ))
+NOMINAL_SCAN_PERIOD_US = int(round(US_PER_S / SCAN_RATE_HZ))
 SCAN_PERIOD_TOLERANCE = 0.2
 """A median gap between scans within +-20 % of 250 ms is taken as the scan period."""
 Y_RIGHT_TO_Y_LEFT = np.array([1.0, -1.0, -1.0])
@@ -88,7 +88,9 @@ def is_oxford_sequence(folder: Path) -> bool:
 
 def read_radar_timestamps(path: Path) -> NDArray[np.int64]:
     """Read `radar.timestamps` ("<t_us> <flag>" lines): (N,) int64 scan times [us], increasing."""
-    ints, _ = read_numeric_table(path, TIMESTAMPS_COLUMNS, int_columns=(0,), delimiter=None)
+    ints, _ = read_numeric_table(
+        path, TIMESTAMPS_COLUMNS, int_columns=(0,), header_rows=1, delimiter=None
+    )
     stamps = ints[:, 0]
     check_strictly_increasing(stamps, path, "timestamp")
     return stamps
@@ -191,6 +193,7 @@ class OxfordSequence:
     Args:
         folder: the sequence folder (holding `radar/` and `radar.timestamps`).
         range_resolution_m: size of one range bin [m] (documentation 0.0438; SDK 0.0432).
+        azimuth_offset_rad: added to every azimuth [rad, CCW] (the `dataset:` config section).
 
     Raises:
         DatasetNotFoundError: `folder` or its `radar/` folder does not exist.
@@ -200,7 +203,12 @@ class OxfordSequence:
 
     family: str = OXFORD_FAMILY
 
-    def __init__(self, folder: Path, range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M) -> None:
+    def __init__(
+        self,
+        folder: Path,
+        range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M,
+        azimuth_offset_rad: float = 0.0,
+    ) -> None:
         folder = Path(folder)
         radar = folder / RADAR_FOLDER
         if not radar.is_dir():
@@ -215,6 +223,18 @@ class OxfordSequence:
                     f"{timestamps_path}: {len(missing)} of {len(paths)} listed scans are missing "
                     f"from {radar} (first: {missing[0]})"
                 )
+            listed = {path.name for path in paths}
+            unlisted = sorted(
+                p.name for p in radar.iterdir() if p.suffix == ".png" and p.name not in listed
+            )
+            if unlisted:
+                logger.warning(
+                    "%s: ignored %d scan(s) of %s not listed in it (first: %s)",
+                    timestamps_path,
+                    len(unlisted),
+                    radar,
+                    unlisted[0],
+                )
         else:
             logger.info("%s absent: taking the scan list from %s", timestamps_path, radar)
             scan_us, paths = list_stamped_files(radar)
@@ -223,6 +243,7 @@ class OxfordSequence:
         self.name: str = folder.name
         self.folder = folder
         self.range_resolution_m = range_resolution_m
+        self.azimuth_offset_rad = float(azimuth_offset_rad)
         self._paths = paths
         self._scan_us = scan_us
         gt_path = folder / ODOMETRY_FILE
@@ -244,19 +265,15 @@ class OxfordSequence:
             IndexError: index out of range.
             DatasetFormatError: unreadable PNG, wrong shape, or a corrupt header.
         """
-        if not -len(self) <= index < len(self):
-            raise IndexError(f"frame {index} out of range for {len(self)} frames")
-        index %= len(self)
+        index = frame_index(index, len(self))
         path = self._paths[index]
         image = read_gray_png(path, (OXFORD_N_AZIMUTHS, OXFORD_HEADER_BYTES + OXFORD_N_BINS))
-        header = parse_navtech_header(image, path)
-        return RadarFrame(
-            timestamp_ns=int(self._times_ns[index]),
-            polar=np.ascontiguousarray(image[:, OXFORD_HEADER_BYTES:]),
-            azimuths_rad=encoder_to_azimuth_ccw(header.encoders),
-            range_resolution_m=self.range_resolution_m,
-            sensor=OXFORD_SENSOR,
-            azimuth_times_ns=header.times * NS_PER_US,
+        scan = decode_oxford_form(image, path, NS_PER_US)
+        return scan.frame(
+            int(self._times_ns[index]),
+            self.range_resolution_m,
+            OXFORD_SENSOR,
+            azimuth_offset_rad=self.azimuth_offset_rad,
         )
 
     @property

@@ -1,15 +1,27 @@
-"""Registry of dataset families, addressed as `family/sequence` or by a plain folder path."""
+"""Registry of dataset families, addressed as `family/sequence` or by a plain folder path.
+
+A loader module registers its family at import (`register(Family(...))`). Families that live
+outside this package (the simulator's `synthetic`) are plug-ins: modules named by the
+`radar_slam.datasets` entry-point group (pyproject.toml), imported on the first lookup.
+"""
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
+from raplace import checks
 
+log = logging.getLogger(__name__)
+
+PLUGIN_GROUP = "radar_slam.datasets"
+"""Entry-point group of dataset-family plug-ins: each names a module that registers a family."""
 DATA_ROOT_ENV = "RADAR_SLAM_DATA"
 DEFAULT_DATA_ROOT = Path("data")
 
@@ -22,9 +34,30 @@ class DatasetConfig:
         range_resolution_m: size of one range bin [m]; None keeps the loader's own value (Oxford:
             0.0438 from the dataset documentation, while the official SDK hard-codes 0.0432;
             MulRan: 0.05952; synthetic: the simulated sensor's).
+        topic, gt_topic: ROS bags: the scan image topic (None: the only mono8 image topic) and
+            an Odometry / PoseStamped ground-truth topic.
+        layout: ROS bags: image layout preset ("radar-slam", "navtech", "mulran").
+        rows, azimuth_direction: ROS bags: override the preset ("azimuths" or "bins" per row;
+            "cw" or "ccw" seen from above).
+        azimuth_offset_rad: added to every scan azimuth [rad, CCW]: an encoder zero that is
+            not the vehicle's forward axis (or the ground truth's). None is 0 (no correction);
+            see the README for what the Oxford samples show.
     """
 
     range_resolution_m: float | None = None
+    azimuth_offset_rad: float | None = None
+    # ROS bags only (radar_slam.datasets.rosbag): scan and GT topics, image layout.
+    topic: str | None = None
+    gt_topic: str | None = None
+    layout: str | None = None
+    rows: Literal["azimuths", "bins"] | None = None
+    azimuth_direction: Literal["cw", "ccw"] | None = None
+
+    def __post_init__(self) -> None:
+        if self.range_resolution_m is not None:
+            checks.positive("range_resolution_m", self.range_resolution_m)
+        if self.azimuth_offset_rad is not None:
+            checks.finite("azimuth_offset_rad", self.azimuth_offset_rad)
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""
@@ -37,7 +70,7 @@ class Family:
 
     Attributes:
         name: family key, e.g. "mulran".
-        open: builds a Sequence from a sequence folder; accepts the keyword arguments of
+        open: builds a RadarSequence from a sequence folder; accepts the keyword arguments of
             `DatasetConfig.loader_options()`.
         detect: True when a folder looks like a sequence of this family.
         layout: human description of the expected folder layout (for error messages).
@@ -47,18 +80,21 @@ class Family:
         detect_priority: families with a higher priority are tried first when detecting a
             folder's format, so a specialised layout (synthetic, a MulRan layout plus a marker
             file) wins over the general one it extends.
+        options: the `DatasetConfig` keys `open` accepts.
     """
 
     name: str
-    open: Callable[..., Sequence]
+    open: Callable[..., RadarSequence]
     detect: Callable[[Path], bool]
     layout: str
     obtain: str
     resolve: Callable[[Path, str], Path] | None = None
     detect_priority: int = 0
+    options: tuple[str, ...] = ("range_resolution_m", "azimuth_offset_rad")
 
 
 _FAMILIES: dict[str, Family] = {}
+_plugins_loaded = False
 
 
 def register(family: Family) -> Family:
@@ -69,8 +105,20 @@ def register(family: Family) -> Family:
     return family
 
 
+def load_plugins() -> None:
+    """Import the plug-in modules of the `radar_slam.datasets` entry points (once)."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    for plugin in entry_points(group=PLUGIN_GROUP):
+        plugin.load()
+        log.debug("dataset plug-in %s loaded from %s", plugin.name, plugin.value)
+
+
 def families() -> dict[str, Family]:
-    """All registered families by name."""
+    """All registered families by name (plug-ins included)."""
+    load_plugins()
     return dict(_FAMILIES)
 
 
@@ -95,7 +143,7 @@ def family_folder(root: Path, family: str) -> Path:
 
 def detect_family(folder: Path) -> Family | None:
     """The family whose layout `folder` matches (highest detect_priority first), or None."""
-    for family in sorted(_FAMILIES.values(), key=lambda f: -f.detect_priority):
+    for family in sorted(families().values(), key=lambda f: -f.detect_priority):
         if family.detect(folder):
             return family
     return None

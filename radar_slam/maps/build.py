@@ -20,17 +20,18 @@ from numpy.typing import NDArray
 
 from odometry import OdometryConfig, OdometryResult
 from odometry.deskew import twist_from_motion
-from odometry.se2 import between, compose
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import TrajectoryError
-from radar_slam.loops import LoopDecision, rotate_covariance
+from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
+from radar_slam.loops import LoopDecision
 from radar_slam.maps.config import MapsConfig
 from radar_slam.maps.format import EDGE_DTYPE, EDGE_KINDS, KEYFRAME_DTYPE, Map, Session
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
-from radar_slam.metrics import associate, umeyama_alignment_se2
 from radar_slam.trajectory import Trajectory
 from raplace.config import DescriptorConfig
 from raplace.descriptor import DescriptorExtractor
+from raplace.se2 import between, compose, rotate_covariance
+from raplace.units import NS_PER_S
 
 if TYPE_CHECKING:
     from radar_slam.pipeline import Results
@@ -38,7 +39,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-NS_PER_S = 1e9
 _UPPER = np.triu_indices(3)
 
 
@@ -100,7 +100,7 @@ def edge_rows(
         covariance = np.zeros((3, 3))
         for s in range(a + 1, b + 1):
             yaw_to_b = float(between(poses[s], poses[b])[2])
-            covariance += rotate_covariance(odometry[s].covariance, yaw_to_b)
+            covariance += rotate_covariance(odometry[s].covariance, -yaw_to_b)
         measurement = between(poses[a], poses[b])
         odometry_kind = EDGE_KINDS.index("odometry")
         rows.append((n - 1, n, odometry_kind, measurement, information_upper(covariance)))
@@ -114,7 +114,7 @@ def edge_rows(
         lead = between(poses[keyframe_scans[kq]], poses[loop.query_key])
         tail = between(poses[loop.match_key], poses[keyframe_scans[km]])
         measurement = compose(compose(lead, loop.measurement), tail)
-        covariance = rotate_covariance(loop.covariance, float(tail[2]))
+        covariance = rotate_covariance(loop.covariance, -float(tail[2]))
         rows.append((kq, km, EDGE_KINDS.index("loop"), measurement, information_upper(covariance)))
     edges = np.array(rows, dtype=EDGE_DTYPE) if rows else np.zeros(0, dtype=EDGE_DTYPE)
     edges["i"] += index_offset
@@ -143,7 +143,7 @@ def map_settings(cfg: MapsConfig, descriptor: DescriptorConfig) -> dict[str, Any
 
 
 def describe_keyframes(
-    sequence: Sequence,
+    sequence: RadarSequence,
     scans: NDArray[np.int64],
     twists: list[FloatArray | None],
     image: ImageGeometry,
@@ -188,7 +188,7 @@ def keyframe_rows(
     return rows
 
 
-def build_map(results: Results, sequence: Sequence, poses: FloatArray | None = None) -> Map:
+def build_map(results: Results, sequence: RadarSequence, poses: FloatArray | None = None) -> Map:
     """A one-session map of a SLAM run (keyframes from `results.slam`, or from `poses`).
 
     Args:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from radar_slam.maps.images import ImageGeometry
+from raplace import checks
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,21 @@ class LocalizerConfig:
     map_sigma_xy_m: float = 0.05
     map_sigma_yaw_deg: float = 0.1
 
+    def __post_init__(self) -> None:
+        checks.at_least("candidates", self.candidates, 1)
+        checks.positive("max_descriptor_distance", self.max_descriptor_distance)
+        checks.non_negative("relocalise_every_m", self.relocalise_every_m)
+        for name in ("confirm_max_error_m", "confirm_max_error_deg", "fix_every_m"):
+            checks.positive(name, getattr(self, name))
+        checks.positive("search_radius_m", self.search_radius_m)
+        checks.at_least("fix_keyframes", self.fix_keyframes, 1)
+        checks.positive("max_innovation_m", self.max_innovation_m)
+        checks.positive("max_innovation_deg", self.max_innovation_deg)
+        checks.positive("lost_after_m", self.lost_after_m)
+        checks.at_least("window_fixes", self.window_fixes, 1)
+        checks.positive("map_sigma_xy_m", self.map_sigma_xy_m)
+        checks.positive("map_sigma_yaw_deg", self.map_sigma_yaw_deg)
+
 
 @dataclass(frozen=True)
 class MapsConfig:
@@ -60,3 +76,6 @@ class MapsConfig:
     keyframe_spacing_m: float = 4.0
     image: ImageGeometry = field(default_factory=ImageGeometry)
     localization: LocalizerConfig = field(default_factory=LocalizerConfig)
+
+    def __post_init__(self) -> None:
+        checks.positive("keyframe_spacing_m", self.keyframe_spacing_m)

@@ -14,9 +14,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.se2 import between, compose, wrap_angle
 from radar_slam.maps.format import Map
 from radar_slam.maps.localizer import Localization
+from raplace.se2 import between, compose, wrap_angle
 
 FloatArray = NDArray[np.float64]
 

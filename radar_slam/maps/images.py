@@ -19,8 +19,9 @@ from numpy.typing import NDArray
 
 from odometry import OdometryConfig, Scan
 from odometry.preprocess import preprocess_polar, sample_scan
-from radar_slam.datasets.frame import RadarFrame
+from odometry.scan import RadarFrame
 from radar_slam.errors import RadarSlamError
+from raplace import checks
 from raplace.warp import CartesianGrid
 
 PIXEL_MAX = 255
@@ -54,6 +55,14 @@ class ImageGeometry:
     range_resolution_m: float = 0.2
     levels: int = 15
     floor_fraction: float = 0.1
+
+    def __post_init__(self) -> None:
+        checks.positive("cell_m", self.cell_m)
+        checks.at_least("size_px", self.size_px, 2)
+        checks.at_least("n_azimuths", self.n_azimuths, 2)
+        checks.positive("range_resolution_m", self.range_resolution_m)
+        checks.in_range("levels", self.levels, 1, 255)
+        checks.in_range("floor_fraction", self.floor_fraction, 0.0, 1.0, open_high=True)
 
     @property
     def max_range_m(self) -> float:

@@ -35,9 +35,8 @@ from numpy.typing import NDArray
 from odometry import Odometry, OdometryResult, Scan
 from odometry.deskew import twist_from_motion
 from odometry.registration import PreparedScan, prepare, register
-from odometry.se2 import between, compose, inverse, wrap_angle
+from odometry.scan import RadarFrame
 from radar_slam.config import merge
-from radar_slam.datasets.frame import RadarFrame
 from radar_slam.errors import ConfigError, GraphError
 from radar_slam.graph import GraphConfig, PoseGraph
 from radar_slam.loops import (
@@ -45,15 +44,15 @@ from radar_slam.loops import (
     KeyScan,
     Verification,
     loop_covariance,
-    rotate_covariance,
-    turned,
 )
-from radar_slam.maps.build import NS_PER_S
+from radar_slam.loops.verification import turned
 from radar_slam.maps.format import Map, MapError
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
 from raplace.config import DescriptorConfig, ExclusionConfig
 from raplace.descriptor import DescriptorExtractor
 from raplace.retrieval import PlaceRecognizer
+from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
+from raplace.units import NS_PER_S
 
 if TYPE_CHECKING:
     from radar_slam.pipeline import PipelineConfig
@@ -246,9 +245,9 @@ class Localizer:
             return
         motion = result.motion
         step = float(np.hypot(motion[0], motion[1]))
-        step_cov = rotate_covariance(result.covariance, float(motion[2]))
-        state.since_cov = rotate_covariance(state.since_cov, float(motion[2])) + step_cov
-        state.pending_cov = rotate_covariance(state.pending_cov, float(motion[2])) + step_cov
+        step_cov = rotate_covariance(result.covariance, -float(motion[2]))
+        state.since_cov = rotate_covariance(state.since_cov, -float(motion[2])) + step_cov
+        state.pending_cov = rotate_covariance(state.pending_cov, -float(motion[2])) + step_cov
         state.since = compose(state.since, motion)
         state.pending_since = compose(state.pending_since, motion)
         state.path_since_fix_m += step

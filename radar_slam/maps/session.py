@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.se2 import between, compose, inverse
-from radar_slam.datasets.frame import Sequence
+from radar_slam.datasets.frame import RadarSequence
+from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
     ConsistencyGate,
@@ -41,7 +41,6 @@ from radar_slam.loops import (
     LoopDecision,
     LoopStatus,
     VerifiedLoop,
-    is_true_loop,
 )
 from radar_slam.maps.build import (
     EDGE_KINDS,
@@ -63,6 +62,7 @@ from radar_slam.maps.localizer import (
 from radar_slam.pipeline import BACKEND_REJECT_WEIGHT, PipelineConfig, Results, odometry_factor
 from radar_slam.trajectory import Trajectory
 from raplace.descriptor import DescriptorExtractor
+from raplace.se2 import between, compose, inverse
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +121,7 @@ class InterSessionDetector:
         self.map_path_m = map_paths(m)
         self.decisions: list[LoopDecision] = []
 
-    def detect(self, results: Results, sequence: Sequence) -> list[LoopDecision]:
+    def detect(self, results: Results, sequence: RadarSequence) -> list[LoopDecision]:
         """Query the map every `query_spacing_m` of the session's optimised path."""
         poses = results.slam.poses
         steps = np.r_[0.0, np.hypot(*np.diff(poses[:, :2], axis=0).T)]
@@ -138,7 +138,12 @@ class InterSessionDetector:
         return self.decisions
 
     def _query(
-        self, n: int, sequence: Sequence, pose: FloatArray, path_m: float, twist: FloatArray | None
+        self,
+        n: int,
+        sequence: RadarSequence,
+        pose: FloatArray,
+        path_m: float,
+        twist: FloatArray | None,
     ) -> None:
         cfg = self.cfg
         frame = sequence[n]
@@ -242,7 +247,7 @@ def joint_graph(
 
 
 def extended_map(
-    m: Map, results: Results, sequence: Sequence, poses: FloatArray, loops: list[LoopDecision]
+    m: Map, results: Results, sequence: RadarSequence, poses: FloatArray, loops: list[LoopDecision]
 ) -> Map:
     """`m` with the session appended (keyframes every `keyframe_spacing_m` of `poses`)."""
     config = results.config
@@ -303,7 +308,7 @@ def _review(loops: list[LoopDecision], graph: PoseGraph, ids: dict[int, int]) ->
             loops[n] = dataclasses.replace(loops[n], status="rejected", reason=reason)
 
 
-def join_session(results: Results, sequence: Sequence, m: Map) -> JoinedSession:
+def join_session(results: Results, sequence: RadarSequence, m: Map) -> JoinedSession:
     """Tie a finished run to map `m` (see the module docstring)."""
     loops = InterSessionDetector(m, results.config).detect(results, sequence)
     gt = results.ground_truth_poses

@@ -10,19 +10,21 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
+from radar_slam.sim.manoeuvres import drive_plan, with_roundabout_islands
 from radar_slam.sim.render import Renderer
 from radar_slam.sim.route import Trajectory, drive, route_edges
+from radar_slam.sim.scatterers import World
 from radar_slam.sim.scenarios import Scenario
-from radar_slam.sim.sensor import NS_PER_S
-from radar_slam.sim.town import Town, generate_town
-from radar_slam.sim.world import World, build_world
+from radar_slam.sim.town import Town
+from radar_slam.sim.townplan import generate_town
+from radar_slam.sim.world import build_world
 from radar_slam.sim.writer import (
     COMPLETE_MARKER,
     WORLD_FILE,
@@ -31,6 +33,7 @@ from radar_slam.sim.writer import (
     write_json,
     write_stamps,
 )
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
@@ -100,13 +103,22 @@ def make_renderer(scene: Scene) -> Renderer:
     return Renderer(scene.world, scene.trajectory, scene.scenario.sensor, scene.scenario.physics)
 
 
-def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
-    """Lay out, populate and drive a scenario (no rendering)."""
-    seed = scenario.seed if seed is None else int(seed)
+def lay_out(scenario: Scenario, seed: int) -> tuple[Town, Trajectory]:
+    """The town of a scenario (with its route's streets protected) and the ego drive through it
+    (smooth lattice drive, or the scenario's plan); no world contents, no rendering."""
     protected = set().union(*(route_edges(list(r)) for r in scenario.town_routes))
     town = generate_town(seed, scenario.town, protected)
     route_rng = np.random.default_rng([seed, scenario.session, ROUTE_STREAM])
-    trajectory = drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    if scenario.plan is None:
+        return town, drive(town, list(scenario.waypoints), scenario.driving, route_rng)
+    town = with_roundabout_islands(town, list(scenario.waypoints), scenario.plan)
+    return town, drive_plan(town, list(scenario.waypoints), scenario.plan, route_rng)
+
+
+def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
+    """Lay out, populate and drive a scenario (no rendering)."""
+    seed = scenario.seed if seed is None else int(seed)
+    town, trajectory = lay_out(scenario, seed)
     world = build_world(
         town, scenario.objects, seed, scenario.session, duration_s=trajectory.duration_s
     )
@@ -140,66 +152,56 @@ class GeneratedSequence:
     build_seconds: float
 
 
-def generate_sequence(
-    scenario: Scenario,
-    folder: Path,
-    seed: int | None = None,
-    frames: int | None = None,
-    workers: int = 1,
-    on_frame: Callable[[int, int], None] | None = None,
-) -> GeneratedSequence:
-    """Generate `scenario` into `folder` (created; files in it are overwritten).
-
-    The completion marker is written last, so a folder without it is a half-written sequence.
-
-    Args:
-        scenario: what to simulate.
-        folder: the sequence folder.
-        seed: seed (default: the scenario's).
-        frames: number of scans (default: the whole route, or the scenario's cap).
-        workers: background PNG writer threads (0: write inline).
-        on_frame: called with (frames done, total) after each scan.
+def checked_frame_count(scene: Scene, frames: int | None) -> int:
+    """`frames`, or the whole route when None.
 
     Raises:
-        RadarSlamError: more frames requested than the route provides.
+        RadarSlamError: more frames requested than the route provides, or fewer than 1.
     """
-    started = time.perf_counter()
-    scene = build_scene(scenario, seed)
-    build_seconds = time.perf_counter() - started
     n_frames = scene.n_frames if frames is None else int(frames)
     if not 0 < n_frames <= scene.n_frames:
         raise RadarSlamError(
-            f"scenario {scenario.name!r} provides 1 to {scene.n_frames} frames, "
+            f"scenario {scene.scenario.name!r} provides 1 to {scene.n_frames} frames, "
             f"{n_frames} requested"
         )
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    return n_frames
+
+
+def write_scans(
+    scene: Scene,
+    folder: Path,
+    n_frames: int,
+    workers: int,
+    on_frame: Callable[[int, int], None] | None,
+) -> NDArray[np.int64]:
+    """Render and write the first `n_frames` scans and their stamps; returns the scans' end
+    offsets from the scenario start [ns]."""
     renderer = make_renderer(scene)
     ends = scene.scan_end_offsets_ns(n_frames)
-    stamps = scenario.start_ns + ends
-    logger.info(
-        "generating %s (seed %d): %d scans into %s", scenario.name, scene.seed, n_frames, folder
-    )
+    stamps = scene.scenario.start_ns + ends
     with ScanWriter(folder, workers) as writer:
         for k in range(n_frames):
             writer.write(int(stamps[k]), render_frame(scene, renderer, k))
             if on_frame is not None:
                 on_frame(k + 1, n_frames)
     write_stamps(folder, stamps)
+    return ends
+
+
+def write_ground_truth(scene: Scene, folder: Path, ends: NDArray[np.int64]) -> float:
+    """Write global_pose.csv (every GT_PERIOD_NS and at every scan end); returns the path
+    length driven [m]."""
     gt_offsets = np.union1d(np.arange(0, int(ends[-1]) + 1, GT_PERIOD_NS, dtype=np.int64), ends)
-    write_global_pose(folder, scenario.start_ns + gt_offsets, scene.base_poses(gt_offsets))
-    moved = np.hypot(*np.diff(scene.base_poses(gt_offsets)[:, :2], axis=0).T).sum()
-    summary = GeneratedSequence(
-        folder=folder,
-        scenario=scenario.name,
-        seed=scene.seed,
-        n_frames=n_frames,
-        duration_s=float(ends[-1]) / NS_PER_S,
-        length_m=float(moved),
-        seconds=time.perf_counter() - started,
-        build_seconds=build_seconds,
-    )
-    description = {
+    base = scene.base_poses(gt_offsets)
+    write_global_pose(folder, scene.scenario.start_ns + gt_offsets, base)
+    return float(np.hypot(*np.diff(base[:, :2], axis=0).T).sum())
+
+
+def world_description(scene: Scene, summary: GeneratedSequence) -> dict[str, object]:
+    """world.json: the scenario, its settings, the route and statistics of the world."""
+    scenario = scene.scenario
+    n_frames = summary.n_frames
+    description: dict[str, object] = {
         "simulator_version": SIM_VERSION,
         "scenario": scenario.name,
         "description": scenario.description,
@@ -227,16 +229,72 @@ def generate_sequence(
             "moving_vehicles": len(scene.world.traffic),
         },
     }
-    write_json(folder / WORLD_FILE, description)
-    write_json(
-        folder / COMPLETE_MARKER,
-        {
-            "simulator_version": SIM_VERSION,
-            "scenario": scenario.name,
-            "seed": scene.seed,
-            "frames": n_frames,
-        },
+    if scenario.plan is not None:
+        description["plan"] = {
+            "events": [{"event": type(e).__name__, **asdict(e)} for e in scenario.plan.events],
+            "driving": scenario.plan.driving,
+        }
+    if scenario.held_out:
+        description["held_out"] = True
+    return description
+
+
+def generate_sequence(
+    scenario: Scenario,
+    folder: Path,
+    seed: int | None = None,
+    frames: int | None = None,
+    workers: int = 1,
+    on_frame: Callable[[int, int], None] | None = None,
+    scene: Scene | None = None,
+) -> GeneratedSequence:
+    """Generate `scenario` into `folder` (created; files in it are overwritten).
+
+    The completion marker is written first saying "complete": false and rewritten last saying
+    true, so a half-written sequence says so.
+
+    Args:
+        scenario: what to simulate.
+        folder: the sequence folder.
+        seed: seed (default: the scenario's).
+        frames: number of scans (default: the whole route, or the scenario's cap).
+        workers: background PNG writer threads (0: write inline).
+        on_frame: called with (frames done, total) after each scan.
+        scene: the scene of `scenario` and `seed` when already built (`build_scene`).
+
+    Raises:
+        RadarSlamError: more frames requested than the route provides.
+    """
+    started = time.perf_counter()
+    scene = build_scene(scenario, seed) if scene is None else scene
+    build_seconds = time.perf_counter() - started
+    n_frames = checked_frame_count(scene, frames)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    marker = {
+        "simulator_version": SIM_VERSION,
+        "scenario": scenario.name,
+        "seed": scene.seed,
+        "frames": n_frames,
+    }
+    write_json(folder / COMPLETE_MARKER, {**marker, "complete": False})  # until the end
+    logger.info(
+        "generating %s (seed %d): %d scans into %s", scenario.name, scene.seed, n_frames, folder
     )
+    ends = write_scans(scene, folder, n_frames, workers, on_frame)
+    moved = write_ground_truth(scene, folder, ends)
+    summary = GeneratedSequence(
+        folder=folder,
+        scenario=scenario.name,
+        seed=scene.seed,
+        n_frames=n_frames,
+        duration_s=float(ends[-1]) / NS_PER_S,
+        length_m=moved,
+        seconds=time.perf_counter() - started,
+        build_seconds=build_seconds,
+    )
+    write_json(folder / WORLD_FILE, world_description(scene, summary))
+    write_json(folder / COMPLETE_MARKER, {**marker, "complete": True})
     logger.info(
         "%s: %d scans, %.0f m in %.1f s", folder, n_frames, summary.length_m, summary.seconds
     )

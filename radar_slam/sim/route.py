@@ -17,10 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
-from odometry.se2 import compose
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
 from radar_slam.errors import RadarSlamError
 from radar_slam.sim.town import Town, offset_polyline, resample_polyline
+from raplace.se2 import compose
 
 FloatArray = NDArray[np.float64]
 

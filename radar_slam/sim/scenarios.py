@@ -15,13 +15,21 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 | multisession_reverse_a | a loop around blocks: map session of a reverse pair | 395 | 1.0 km |
 | multisession_reverse_b | the same streets the other way, other lane, next day | 399 | 1.0 km |
 | tiny_reverse_a, _b | tiny's block one way, then the other way (session 1): CI | 90 | 165 m |
+
+Driving scenarios (`DRIVING_SCENARIOS`, each also as `tiny_<name>` at 1024 bins for CI):
+turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear, and
+the held-out heldout_town and heldout_mixed (`HELD_OUT`: benchmarks report them separately and
+nobody tunes on them). All but turn_around drive a plan (manoeuvres.py) with stepped curvature.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 from radar_slam.errors import RadarSlamError
+from radar_slam.sim.driving import PlanDrivingConfig
+from radar_slam.sim.manoeuvres import DrivePlan, Reverse, Roundabout, Stop, TurnAround
 from radar_slam.sim.physics import PhysicsConfig
 from radar_slam.sim.route import DrivingConfig
 from radar_slam.sim.sensor import SensorConfig
@@ -59,6 +67,9 @@ class Scenario:
         start_ns: time of the first scan's first column [ns].
         origin_xy: offset of the town frame in the written poses [m].
         sensor, physics, town, objects, driving: configuration sections.
+        plan: events and driving of a stepped-curvature drive (manoeuvres.py) in a town with
+            straight streets; None: the smooth lattice drive of route.py with `driving`.
+        held_out: a benchmark scenario nobody tunes on (benchmarks report it separately).
     """
 
     name: str
@@ -75,6 +86,8 @@ class Scenario:
     town: TownConfig = field(default_factory=TownConfig)
     objects: ObjectConfig = field(default_factory=ObjectConfig)
     driving: DrivingConfig = field(default_factory=DrivingConfig)
+    plan: DrivePlan | None = None
+    held_out: bool = False
 
 
 _TINY_ROUTE: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2))
@@ -158,120 +171,314 @@ _LONG_ROUTE: Waypoints = (
     (2, 3),
 )
 
+_BASE_SCENARIOS: tuple[Scenario, ...] = (
+    Scenario(
+        name="tiny",
+        description="3 x 3 blocks, 1024 bins (61 m), 60 scans: for unit tests",
+        seed=11,
+        waypoints=_TINY_ROUTE,
+        town_routes=(_TINY_ROUTE,),
+        max_frames=60,
+        start_ns=EPOCH_NS + 1 * DAY_NS,
+        sensor=_TINY_SENSOR,
+        town=_TINY_TOWN,
+    ),
+    Scenario(
+        name="tiny_loop",
+        description="a small loop with a revisit, reduced bins (1024, 61 m): for CI",
+        seed=11,
+        waypoints=_TINY_LOOP_ROUTE,
+        town_routes=(_TINY_LOOP_ROUTE,),
+        start_ns=EPOCH_NS + 1 * DAY_NS,
+        sensor=_TINY_SENSOR,
+        town=_TINY_TOWN,
+    ),
+    Scenario(
+        name="loop",
+        description="a two-block loop driven twice in the same direction (~2 min)",
+        seed=7,
+        waypoints=_LOOP_ROUTE,
+        town_routes=(_LOOP_ROUTE,),
+        start_ns=EPOCH_NS + 2 * DAY_NS,
+    ),
+    Scenario(
+        name="reverse",
+        description="a figure-eight driven once, then again in the opposite direction in the "
+        "other lane (3.5 m offset)",
+        seed=5,
+        waypoints=_REVERSE_ROUTE,
+        town_routes=(_REVERSE_ROUTE,),
+        start_ns=EPOCH_NS + 3 * DAY_NS,
+    ),
+    Scenario(
+        name="multisession_a",
+        description="session A of a town shared with multisession_b",
+        seed=9,
+        waypoints=_MULTI_A,
+        town_routes=(_MULTI_A, _MULTI_B),
+        session=0,
+        start_ns=EPOCH_NS + 4 * DAY_NS,
+    ),
+    Scenario(
+        name="multisession_b",
+        description="session B: another route a day later; parked cars, vegetation and "
+        "traffic changed",
+        seed=9,
+        waypoints=_MULTI_B,
+        town_routes=(_MULTI_A, _MULTI_B),
+        session=1,
+        start_ns=EPOCH_NS + 5 * DAY_NS,
+    ),
+    Scenario(
+        name="long",
+        description="4.5 km through a larger town: three loops, revisits in both directions",
+        seed=3,
+        waypoints=_LONG_ROUTE,
+        town_routes=(_LONG_ROUTE,),
+        start_ns=EPOCH_NS + 6 * DAY_NS,
+        town=TownConfig(n_blocks=(8, 7)),
+    ),
+)
+
+
+_MAP_SCENARIOS: tuple[Scenario, ...] = (
+    Scenario(  # issue-13: a reverse-direction session pair for maps
+        name="multisession_reverse_a",
+        description="the map session of a reverse pair: a loop around town blocks",
+        seed=13,
+        waypoints=_REVERSE_SESSION_A,
+        town_routes=(_REVERSE_SESSION_A,),
+        session=0,
+        start_ns=EPOCH_NS + 7 * DAY_NS,
+    ),
+    Scenario(  # issue-13
+        name="multisession_reverse_b",
+        description="the same streets the other way round, in the other lane, a day later; "
+        "parked cars, vegetation and traffic changed",
+        seed=13,
+        waypoints=_REVERSE_SESSION_B,
+        town_routes=(_REVERSE_SESSION_A,),
+        session=1,
+        start_ns=EPOCH_NS + 8 * DAY_NS,
+    ),
+    Scenario(  # issue-13: the reverse pair at reduced bins, for CI
+        name="tiny_reverse_a",
+        description="once around a block of the tiny town, reduced bins: map tests",
+        seed=11,
+        waypoints=_TINY_BLOCK,
+        town_routes=(_TINY_BLOCK,),
+        max_frames=TINY_REVERSE_FRAMES,
+        start_ns=EPOCH_NS + 9 * DAY_NS,
+        sensor=_TINY_SENSOR,
+        town=_TINY_TOWN,
+    ),
+    Scenario(  # issue-13
+        name="tiny_reverse_b",
+        description="the same block the other way round, other lane, another session",
+        seed=11,
+        waypoints=tuple(reversed(_TINY_BLOCK)),
+        town_routes=(_TINY_BLOCK,),
+        session=1,
+        max_frames=TINY_REVERSE_FRAMES,
+        start_ns=EPOCH_NS + 10 * DAY_NS,
+        sensor=_TINY_SENSOR,
+        town=_TINY_TOWN,
+    ),
+)
+"""Session pairs for maps (issue-13): a reverse-direction pair and its reduced-bin version."""
+
+
+def _plan_town(**overrides: Any) -> TownConfig:
+    """A town with straight streets (plans need them) of 70-110 m blocks, 4 x 3 of them."""
+    return TownConfig(
+        **{"n_blocks": (4, 3), "block_size_m": (70.0, 110.0), "warp_amplitude_m": 0.0, **overrides}
+    )
+
+
+_WIDE_STREETS = {"road_half_width_m": (6.8, 7.6)}
+"""Carriageways wide enough for a U-turn at full lock."""
+_OPEN_JUNCTIONS = {"road_half_width_m": (6.8, 7.6), "sidewalk_m": (3.5, 5.0)}
+"""Junctions with room for a roundabout (building lines >= 11 m from the street centre)."""
+_NARROW_STREETS = {"road_half_width_m": (4.8, 5.4)}
+"""Carriageways that need a three-point turn."""
+_TURN_AROUND_ROUTE: Waypoints = ((1, 1), (2, 1), (3, 1), (3, 2), (2, 2), (2, 1), (1, 1), (0, 1))
+_U_TURN_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (3, 1), (2, 1), (1, 1))
+_THREE_POINT_ROUTE: Waypoints = ((1, 0), (1, 1), (1, 2), (1, 1), (1, 0))
+_ROUNDABOUT_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2), (2, 3))
+_STOP_AND_GO_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2), (3, 2))
+_JUNCTION_ROUTE: Waypoints = ((0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3))
+_REVERSE_GEAR_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2))
+_HELD_OUT_TOWN_ROUTE: Waypoints = (
+    (1, 1),
+    (3, 1),
+    (3, 3),
+    (4, 3),
+    (4, 4),
+    (3, 4),
+    (3, 3),
+    (2, 3),
+    (2, 2),
+    (0, 2),
+    (1, 2),
+)
+"""Out, round a block and back along the street it came (as the 25 % drift town drive), on, and
+back again after a U-turn."""
+_HELD_OUT_MIXED_ROUTE: Waypoints = (
+    (0, 1),
+    (1, 1),
+    (2, 1),
+    (2, 2),
+    (3, 2),
+    (4, 2),
+    (3, 2),
+    (3, 3),
+    (2, 3),
+    (1, 3),
+    (1, 2),
+)
+_CI = " Reduced bins (1024, 61 m) for CI."
+_URBAN_SMOOTH = DrivingConfig(min_speed_mps=3.0, cruise_speed_mps=(9.0, 13.5))
+"""The smooth lattice drive at urban speeds (<= 14 m/s), slowing for tight corners."""
+
+
+DRIVING_SCENARIOS: tuple[Scenario, ...] = (
+    Scenario(
+        name="turn_around",
+        description="out along a street, round a block, back along the same street the other way",
+        seed=31,
+        waypoints=_TURN_AROUND_ROUTE,
+        town_routes=(_TURN_AROUND_ROUTE,),
+        start_ns=EPOCH_NS + 7 * DAY_NS,
+        town=TownConfig(n_blocks=(4, 3), block_size_m=(70.0, 110.0)),
+        driving=_URBAN_SMOOTH,
+    ),
+    Scenario(
+        name="u_turn",
+        description="a U-turn at full lock in a wide street and back along it",
+        seed=32,
+        waypoints=_U_TURN_ROUTE,
+        town_routes=(_U_TURN_ROUTE,),
+        start_ns=EPOCH_NS + 8 * DAY_NS,
+        town=_plan_town(**_WIDE_STREETS),
+        plan=DrivePlan(events=(TurnAround(3, "u_turn", 40.0),)),
+    ),
+    Scenario(
+        name="three_point_turn",
+        description="a three-point turn (forward, reverse, forward at full lock) in a narrow "
+        "street",
+        seed=33,
+        waypoints=_THREE_POINT_ROUTE,
+        town_routes=(_THREE_POINT_ROUTE,),
+        start_ns=EPOCH_NS + 9 * DAY_NS,
+        town=_plan_town(**_NARROW_STREETS),
+        plan=DrivePlan(events=(TurnAround(2, "three_point", 35.0),)),
+    ),
+    Scenario(
+        name="roundabout",
+        description="into a roundabout, 210 degrees round it at constant yaw rate, out left",
+        seed=34,
+        waypoints=_ROUNDABOUT_ROUTE,
+        town_routes=(_ROUNDABOUT_ROUTE,),
+        start_ns=EPOCH_NS + 10 * DAY_NS,
+        town=_plan_town(**_OPEN_JUNCTIONS),
+        plan=DrivePlan(events=(Roundabout(2),)),
+    ),
+    Scenario(
+        name="stop_and_go",
+        description="three junction stops (10 s, 3 s, 10 s), braking and accelerating at 3 m/s^2",
+        seed=35,
+        waypoints=_STOP_AND_GO_ROUTE,
+        town_routes=(_STOP_AND_GO_ROUTE,),
+        start_ns=EPOCH_NS + 11 * DAY_NS,
+        town=_plan_town(),
+        plan=DrivePlan(
+            events=(Stop(1, 10.0), Stop(2, 3.0), Stop(3, 10.0)),
+            driving=PlanDrivingConfig(accel_mps2=3.0, decel_mps2=3.0),
+        ),
+    ),
+    Scenario(
+        name="junction_turns",
+        description="five sharp 90-degree junction turns, curvature stepping 0 -> 1/R -> 0, "
+        "12-14 m/s between them",
+        seed=36,
+        waypoints=_JUNCTION_ROUTE,
+        town_routes=(_JUNCTION_ROUTE,),
+        start_ns=EPOCH_NS + 12 * DAY_NS,
+        town=_plan_town(),
+        plan=DrivePlan(driving=PlanDrivingConfig(cruise_speed_mps=(12.0, 14.0))),
+    ),
+    Scenario(
+        name="reverse_gear",
+        description="stop, reverse 30 m along the street in reverse gear, stop, drive on",
+        seed=37,
+        waypoints=_REVERSE_GEAR_ROUTE,
+        town_routes=(_REVERSE_GEAR_ROUTE,),
+        start_ns=EPOCH_NS + 13 * DAY_NS,
+        town=_plan_town(),
+        plan=DrivePlan(events=(Reverse(1, 60.0, 30.0),)),
+    ),
+    Scenario(
+        name="heldout_town",
+        description="HELD OUT: 1.2 km through another town: stepped junction turns, a turn back "
+        "round a block, three stops, a U-turn",
+        seed=41,
+        waypoints=_HELD_OUT_TOWN_ROUTE,
+        town_routes=(_HELD_OUT_TOWN_ROUTE,),
+        start_ns=EPOCH_NS + 14 * DAY_NS,
+        town=_plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
+        plan=DrivePlan(
+            events=(Stop(2, 10.0), Stop(8, 5.0), Stop(11, 10.0), TurnAround(12, "u_turn", 45.0)),
+            driving=PlanDrivingConfig(cruise_speed_mps=(11.0, 14.0)),
+        ),
+        held_out=True,
+    ),
+    Scenario(
+        name="heldout_mixed",
+        description="HELD OUT: stops, sharp turns, a roundabout, a three-point turn and "
+        "reversing in another town",
+        seed=42,
+        waypoints=_HELD_OUT_MIXED_ROUTE,
+        town_routes=(_HELD_OUT_MIXED_ROUTE,),
+        start_ns=EPOCH_NS + 15 * DAY_NS,
+        town=_plan_town(n_blocks=(5, 4), block_size_m=(80.0, 120.0), **_OPEN_JUNCTIONS),
+        plan=DrivePlan(
+            events=(
+                Stop(1, 10.0),
+                Roundabout(2),
+                Stop(4, 4.0),
+                TurnAround(5, "three_point", 30.0),
+                Reverse(7, 70.0, 25.0),
+                Stop(9, 10.0),
+            ),
+            driving=PlanDrivingConfig(accel_mps2=3.0),
+        ),
+        held_out=True,
+    ),
+)
+"""Scenarios of urban driving the smooth lattice drive lacks (issue 10): turning round, gear
+changes, roundabouts, stops, stepped curvature; and two held-out benchmark scenarios."""
+
+
+def reduced_bin_versions() -> list[Scenario]:
+    """`tiny_<name>`: each driving scenario at 1024 bins (same town, route and seed), for CI."""
+    return [
+        replace(s, name=f"tiny_{s.name}", description=s.description + _CI, sensor=_TINY_SENSOR)
+        for s in DRIVING_SCENARIOS
+    ]
+
+
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
-        Scenario(
-            name="tiny",
-            description="3 x 3 blocks, 1024 bins (61 m), 60 scans: for unit tests",
-            seed=11,
-            waypoints=_TINY_ROUTE,
-            town_routes=(_TINY_ROUTE,),
-            max_frames=60,
-            start_ns=EPOCH_NS + 1 * DAY_NS,
-            sensor=_TINY_SENSOR,
-            town=_TINY_TOWN,
-        ),
-        Scenario(
-            name="tiny_loop",
-            description="a small loop with a revisit, reduced bins (1024, 61 m): for CI",
-            seed=11,
-            waypoints=_TINY_LOOP_ROUTE,
-            town_routes=(_TINY_LOOP_ROUTE,),
-            start_ns=EPOCH_NS + 1 * DAY_NS,
-            sensor=_TINY_SENSOR,
-            town=_TINY_TOWN,
-        ),
-        Scenario(
-            name="loop",
-            description="a two-block loop driven twice in the same direction (~2 min)",
-            seed=7,
-            waypoints=_LOOP_ROUTE,
-            town_routes=(_LOOP_ROUTE,),
-            start_ns=EPOCH_NS + 2 * DAY_NS,
-        ),
-        Scenario(
-            name="reverse",
-            description="a figure-eight driven once, then again in the opposite direction in the "
-            "other lane (3.5 m offset)",
-            seed=5,
-            waypoints=_REVERSE_ROUTE,
-            town_routes=(_REVERSE_ROUTE,),
-            start_ns=EPOCH_NS + 3 * DAY_NS,
-        ),
-        Scenario(
-            name="multisession_a",
-            description="session A of a town shared with multisession_b",
-            seed=9,
-            waypoints=_MULTI_A,
-            town_routes=(_MULTI_A, _MULTI_B),
-            session=0,
-            start_ns=EPOCH_NS + 4 * DAY_NS,
-        ),
-        Scenario(
-            name="multisession_b",
-            description="session B: another route a day later; parked cars, vegetation and "
-            "traffic changed",
-            seed=9,
-            waypoints=_MULTI_B,
-            town_routes=(_MULTI_A, _MULTI_B),
-            session=1,
-            start_ns=EPOCH_NS + 5 * DAY_NS,
-        ),
-        Scenario(
-            name="long",
-            description="4.5 km through a larger town: three loops, revisits in both directions",
-            seed=3,
-            waypoints=_LONG_ROUTE,
-            town_routes=(_LONG_ROUTE,),
-            start_ns=EPOCH_NS + 6 * DAY_NS,
-            town=TownConfig(n_blocks=(8, 7)),
-        ),
-        Scenario(  # issue-13: a reverse-direction session pair for maps
-            name="multisession_reverse_a",
-            description="the map session of a reverse pair: a loop around town blocks",
-            seed=13,
-            waypoints=_REVERSE_SESSION_A,
-            town_routes=(_REVERSE_SESSION_A,),
-            session=0,
-            start_ns=EPOCH_NS + 7 * DAY_NS,
-        ),
-        Scenario(  # issue-13
-            name="multisession_reverse_b",
-            description="the same streets the other way round, in the other lane, a day later; "
-            "parked cars, vegetation and traffic changed",
-            seed=13,
-            waypoints=_REVERSE_SESSION_B,
-            town_routes=(_REVERSE_SESSION_A,),
-            session=1,
-            start_ns=EPOCH_NS + 8 * DAY_NS,
-        ),
-        Scenario(  # issue-13: the reverse pair at reduced bins, for CI
-            name="tiny_reverse_a",
-            description="once around a block of the tiny town, reduced bins: map tests",
-            seed=11,
-            waypoints=_TINY_BLOCK,
-            town_routes=(_TINY_BLOCK,),
-            max_frames=TINY_REVERSE_FRAMES,
-            start_ns=EPOCH_NS + 9 * DAY_NS,
-            sensor=_TINY_SENSOR,
-            town=_TINY_TOWN,
-        ),
-        Scenario(  # issue-13
-            name="tiny_reverse_b",
-            description="the same block the other way round, other lane, another session",
-            seed=11,
-            waypoints=tuple(reversed(_TINY_BLOCK)),
-            town_routes=(_TINY_BLOCK,),
-            session=1,
-            max_frames=TINY_REVERSE_FRAMES,
-            start_ns=EPOCH_NS + 10 * DAY_NS,
-            sensor=_TINY_SENSOR,
-            town=_TINY_TOWN,
-        ),
+        *_BASE_SCENARIOS,
+        *_MAP_SCENARIOS,
+        *DRIVING_SCENARIOS,
+        *reduced_bin_versions(),
     )
 }
 """Every scenario by name."""
+HELD_OUT: tuple[str, ...] = tuple(name for name, s in SCENARIOS.items() if s.held_out)
+"""Scenarios reserved for evaluation: report them separately and never tune on them."""
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "multisession": ("multisession_a", "multisession_b"),

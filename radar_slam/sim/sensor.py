@@ -26,9 +26,9 @@ from radar_slam.datasets.navtech import (
     MULRAN_RANGE_RESOLUTION_M,
     SCAN_RATE_HZ,
 )
+from raplace.units import NS_PER_S
 
 TWO_PI = 2.0 * np.pi
-NS_PER_S = 1_000_000_000
 
 
 @dataclass(frozen=True)

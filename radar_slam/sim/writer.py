@@ -5,13 +5,18 @@
 <seq>/sensor_data/navtech_top_stamp.csv     one t_ns per line (end of each sweep)
 <seq>/global_pose.csv                       t_ns, 3x4 row-major [R|t] of the vehicle BASE
 <seq>/world.json                            seed, scenario, every parameter
-<seq>/sim_complete.json                     written last: the sequence is complete
+<seq>/sim_complete.json                     written first with "complete": false, rewritten
+                                            last with "complete": true
 ```
+
+`simulator_files` tells the files the simulator writes from any others (a user's), so a
+sequence can be replaced without deleting anything it did not write.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
@@ -125,8 +130,55 @@ def _jsonable(value: Any) -> Any:
 
 
 def write_json(path: Path, content: dict[str, Any]) -> None:
-    """Write a JSON description (dataclasses and numpy scalars converted)."""
-    path.write_text(json.dumps(_jsonable(content), indent=2) + "\n")
+    """Write a JSON description (dataclasses and numpy scalars converted), atomically: a
+    temporary sibling renamed over `path`, so a marker is never half written."""
+    temporary = path.parent / f".{path.name}.partial-{os.getpid()}"
+    temporary.write_text(json.dumps(_jsonable(content), indent=2) + "\n")
+    os.replace(temporary, path)
+
+
+FIGURE_FILE = Path("sim_figure.png")
+"""The optional overview figure of `radar-slam simulate --plot`."""
+_SIMULATOR_FILES = (STAMP_FILE, GLOBAL_POSE_FILE, WORLD_FILE, COMPLETE_MARKER, FIGURE_FILE)
+
+
+def simulator_files(folder: Path) -> tuple[list[Path], list[Path]]:
+    """The files under `folder` split into (written by the simulator, anything else).
+
+    The simulator's are `<digits>.png` scans in the polar folder, the fixed files of the
+    layout (the stamp list, global_pose.csv, world.json, the marker, the figure) and the
+    temporary `.<name>.partial-<pid>` a killed `write_json` may leave.
+    """
+    ours: list[Path] = []
+    others: list[Path] = []
+    own = {folder / relative for relative in _SIMULATOR_FILES}
+    scans = folder / POLAR_DIR
+    for path in sorted(folder.rglob("*")):
+        if path.is_dir() and not path.is_symlink():
+            continue
+        scan = path.parent == scans and path.suffix == ".png" and path.stem.isdigit()
+        temporary = path.parent == folder and path.name.startswith(".") and ".partial-" in path.name
+        (ours if path in own or scan or temporary else others).append(path)
+    return ours, others
+
+
+def remove_simulated(folder: Path) -> None:
+    """Delete a simulated sequence's files from `folder`, and folders left empty.
+
+    Raises:
+        ResultsError: `folder` holds a file the simulator did not write (nothing is deleted).
+    """
+    ours, others = simulator_files(folder)
+    if others:
+        raise ResultsError(
+            f"{folder}: holds {len(others)} file(s) the simulator did not write "
+            f"(first: {others[0].relative_to(folder)}); not replacing it"
+        )
+    for path in ours:
+        path.unlink()
+    for sub in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: -len(p.parts)):
+        if not any(sub.iterdir()):
+            sub.rmdir()
 
 
 def read_json(path: Path) -> dict[str, Any] | None:

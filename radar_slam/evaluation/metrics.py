@@ -27,9 +27,10 @@ from evo.core.metrics import APE, RPE, PoseRelation, StatisticsType, Unit
 from evo.core.trajectory import PoseTrajectory3D
 from numpy.typing import NDArray
 
-from odometry.se2 import between, compose, inverse, wrap_angle
 from radar_slam.errors import TrajectoryError
 from radar_slam.trajectory import Trajectory
+from raplace.se2 import between, compose, inverse, wrap_angle
+from raplace.units import NS_PER_MS
 
 logger = logging.getLogger(__name__)
 
@@ -89,7 +90,7 @@ def associate(
     est_idx = np.sort(order[first])
     if len(est_idx) == 0:
         raise TrajectoryError(
-            f"no common poses: no estimate timestamp is within {max_diff_ns / 1e6:g} ms of a "
+            f"no common poses: no estimate timestamp is within {max_diff_ns / NS_PER_MS:g} ms of a "
             f"ground-truth timestamp (estimate {t_est[0]}..{t_est[-1]} ns, "
             f"ground truth {t_gt[0]}..{t_gt[-1]} ns)"
         )

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.loops import KeyScan, Recognizer, Verification, Verifier
-from raplace.retrieval import Candidate
+from radar_slam.loops import KeyScan, Verification, Verifier
+from raplace.retrieval import Candidate, Recognizer
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,9 @@ class InjectingRecognizer:
         self.inner = inner
         self.injection = injection
         self.keys: list[int] = []
+
+    def __len__(self) -> int:
+        return len(self.inner)
 
     def add(self, descriptor: NDArray, key: int, time_s: float | None = None) -> None:
         self.inner.add(descriptor, key, time_s)

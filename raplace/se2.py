@@ -1,7 +1,10 @@
-"""SE(2) pose algebra on (x, y, yaw) arrays.
+"""SE(2) pose algebra on (x, y, yaw) arrays: the one home of these helpers for every package.
 
-Poses are `(..., 3)` float arrays `(x [m], y [m], yaw [rad])`. `compose(a, b)` is a * b, so
-`T_world_b = compose(T_world_a, T_a_b)`. Every function broadcasts over leading axes.
+Conventions (one for the whole project):
+- Poses are `(..., 3)` float arrays `(x [m], y [m], yaw [rad])`; `compose(a, b)` is a * b, so
+  `T_world_b = compose(T_world_a, T_a_b)`. Every function broadcasts over leading axes.
+- Angles are wrapped to [-pi, pi) (`wrap_angle`): pi maps to -pi.
+- Tangent vectors and covariances are in GTSAM's order (x, y, yaw), translation first.
 """
 
 from __future__ import annotations
@@ -16,6 +19,31 @@ def wrap_angle(angle: ArrayLike) -> FloatArray:
     """Wrap angles [rad] into [-pi, pi)."""
     a = np.asarray(angle, dtype=np.float64)
     return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def adjoint(pose: ArrayLike) -> FloatArray:
+    """SE(2) adjoint (..., 3, 3) of poses (..., 3) in the tangent order (x, y, yaw):
+    Exp(Ad(T) xi) = T Exp(xi) T^-1 (equal to GTSAM's `Pose2.AdjointMap`)."""
+    p = np.asarray(pose, dtype=np.float64)
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    ad = np.zeros(p.shape[:-1] + (3, 3))
+    ad[..., 0, 0], ad[..., 0, 1], ad[..., 0, 2] = c, -s, p[..., 1]
+    ad[..., 1, 0], ad[..., 1, 1], ad[..., 1, 2] = s, c, -p[..., 0]
+    ad[..., 2, 2] = 1.0
+    return ad
+
+
+def rotate_covariance(covariance: ArrayLike, yaw_rad: float) -> FloatArray:
+    """Re-express a (3, 3) covariance (x, y, yaw order) whose translation block is in frame B in
+    the axes of frame A, where B is turned by `yaw_rad` relative to A (B's yaw in A).
+
+    The translation block becomes R(yaw) C R(yaw)^T; the yaw variance is unchanged. The result is
+    symmetrised (exactly symmetric, as GTSAM requires).
+    """
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    out = rot @ np.asarray(covariance, dtype=np.float64) @ rot.T
+    return 0.5 * (out + out.T)
 
 
 def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:

@@ -1,0 +1,399 @@
+"""ROS bags as radar sequences: a ROS 1 `.bag` file or a ROS 2 bag folder (sqlite3 or MCAP).
+
+Read with `rosbags` (pure Python; no ROS installation). One `sensor_msgs/Image` topic holds the
+scans (default: the only one whose encoding is `mono8` or `8UC1`); each message is one sweep, its
+`header.stamp` the scan time. How the image maps to azimuths and bins is an `ImageLayout`, named
+by a preset or set key by key in the `dataset:` config section:
+
+    preset      rows      azimuths                                   source
+    radar-slam  azimuths  11-byte Oxford-form header per row (int64  `radar-slam export`
+                          time [ns], uint16 encoder, valid byte)
+    navtech     azimuths  row j at j / n of a turn clockwise         Navtech ROS driver
+                                                                     (radar_data/b_scan_image)
+    mulran      bins      column j at encoder 9 + 14 j, clockwise    MulRan file player
+                                                                     (/Navtech/Polar)
+
+Bags written by `radar-slam export` carry a `std_msgs/String` topic `/radar_slam/scan_info`
+(JSON: layout, range resolution, sensor, scan and GT topics), so they need no options. Ground
+truth comes from a `nav_msgs/Odometry` or `geometry_msgs/PoseStamped` topic (`gt_topic`): its
+(x, y, yaw) poses, taken as radar poses in their world frame, are interpolated to the scan times
+(exact at equal stamps; NaN more than 0.5 s outside their span).
+
+Frames load lazily: opening indexes the scan messages (one pass reading their headers) and each
+`__getitem__` seeks to one message.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.interfaces import Connection
+from rosbags.typesys import Stores, get_typestore
+
+from radar_slam.datasets._io import decode_oxford_form, frame_index
+from radar_slam.datasets.frame import RadarFrame
+from radar_slam.datasets.mulran import interpolate_poses
+from radar_slam.datasets.navtech import (
+    ENCODER_TICKS_PER_REV,
+    MULRAN_FIRST_ENCODER,
+    MULRAN_RANGE_RESOLUTION_M,
+    OXFORD_HEADER_BYTES,
+    OXFORD_RANGE_RESOLUTION_M,
+    encoder_to_azimuth_ccw,
+)
+from radar_slam.datasets.registry import Family, register
+from radar_slam.errors import ConfigError, DatasetFormatError, DatasetNotFoundError
+from radar_slam.trajectory import yaw_from_quaternion
+from raplace.units import NS_PER_S
+
+logger = logging.getLogger(__name__)
+
+ROSBAG_FAMILY = "rosbag"
+ROSBAG_SENSOR = "navtech-rosbag"
+ROS1_SUFFIX = ".bag"
+ROS2_METADATA = "metadata.yaml"
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+GT_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped")
+MONO_ENCODINGS = ("mono8", "8UC1")
+SCAN_INFO_TOPIC = "/radar_slam/scan_info"
+"""JSON metadata written by `radar-slam export` (std_msgs/String, one message)."""
+
+Rows = Literal["azimuths", "bins"]
+Direction = Literal["cw", "ccw"]
+
+
+@dataclass(frozen=True)
+class ImageLayout:
+    """How a radar image message maps to the polar convention.
+
+    Attributes:
+        rows: "azimuths" (one row per azimuth) or "bins" (one row per range bin).
+        azimuth_direction: "cw" or "ccw" seen from above, from the vehicle's forward axis.
+        range_resolution_m: size of one bin [m]; bin k is centred at (k + 0.5) * resolution.
+        first_azimuth_ticks: encoder count (of 5600 per turn) of the first azimuth.
+        oxford_header: rows carry the 11-byte Oxford-form header with times in ns (then the
+            azimuths come from the encoder counts and `azimuth_direction` is ignored).
+    """
+
+    rows: Rows = "azimuths"
+    azimuth_direction: Direction = "cw"
+    range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M
+    first_azimuth_ticks: int = 0
+    oxford_header: bool = False
+
+    def azimuths_rad(self, n_azimuths: int) -> NDArray[np.float64]:
+        """(n_azimuths,) CCW azimuths [rad] of evenly spaced rows/columns."""
+        ticks = self.first_azimuth_ticks + np.arange(n_azimuths) * (
+            ENCODER_TICKS_PER_REV / n_azimuths
+        )
+        clockwise = encoder_to_azimuth_ccw(ticks)
+        return clockwise if self.azimuth_direction == "cw" else -clockwise
+
+    def decode(
+        self, image: NDArray[np.uint8], where: Path
+    ) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.int64] | None]:
+        """(polar (n_azimuths, n_bins) uint8, CCW azimuths [rad], azimuth times [ns] or None)."""
+        if self.oxford_header:
+            scan = decode_oxford_form(image, where, 1)
+            return scan.polar, scan.azimuths_rad, scan.azimuth_times_ns
+        polar = np.ascontiguousarray(image if self.rows == "azimuths" else image.T)
+        return polar, self.azimuths_rad(polar.shape[0]), None
+
+
+LAYOUT_PRESETS: dict[str, ImageLayout] = {
+    "radar-slam": ImageLayout(rows="azimuths", oxford_header=True),
+    "navtech": ImageLayout(rows="azimuths", azimuth_direction="cw"),
+    "mulran": ImageLayout(
+        rows="bins",
+        azimuth_direction="cw",
+        range_resolution_m=MULRAN_RANGE_RESOLUTION_M,
+        first_azimuth_ticks=MULRAN_FIRST_ENCODER,
+    ),
+}
+"""Layouts by name: our own export, the Navtech ROS driver, the MulRan file player."""
+
+ROSBAG_LAYOUT = (
+    "a ROS 1 <name>.bag file or a ROS 2 bag folder (metadata.yaml + .db3 or .mcap) with one "
+    "sensor_msgs/Image radar topic (options: dataset.topic, layout, gt_topic)"
+)
+ROSBAG_OBTAIN = "your own recordings (Navtech ROS driver, MulRan file player), or radar-slam export"
+
+
+def is_bag(path: Path) -> bool:
+    """True for a `.bag` file or a folder holding a ROS 2 `metadata.yaml`."""
+    if path.is_file():
+        return path.suffix == ROS1_SUFFIX
+    return (path / ROS2_METADATA).is_file()
+
+
+def resolve_layout(
+    layout: str | None,
+    rows: Rows | None = None,
+    azimuth_direction: Direction | None = None,
+    range_resolution_m: float | None = None,
+    base: ImageLayout | None = None,
+) -> ImageLayout:
+    """The preset `layout` (or `base`, or the Navtech driver's) with the given keys overriding.
+
+    Raises:
+        ConfigError: an unknown preset name.
+    """
+    if layout is not None:
+        if layout not in LAYOUT_PRESETS:
+            raise ConfigError(
+                f"dataset.layout: unknown layout {layout!r} (presets: {', '.join(LAYOUT_PRESETS)})"
+            )
+        chosen = LAYOUT_PRESETS[layout]
+    else:
+        chosen = base or LAYOUT_PRESETS["navtech"]
+    changes: dict[str, Any] = {
+        "rows": rows,
+        "azimuth_direction": azimuth_direction,
+        "range_resolution_m": range_resolution_m,
+    }
+    return replace(chosen, **{key: value for key, value in changes.items() if value is not None})
+
+
+def stamp_ns(header: Any) -> int:
+    """Integer nanoseconds of a std_msgs/Header stamp."""
+    return int(header.stamp.sec) * NS_PER_S + int(header.stamp.nanosec)
+
+
+def image_array(message: Any, where: str) -> NDArray[np.uint8]:
+    """(height, width) uint8 view of a mono8 / 8UC1 sensor_msgs/Image (row padding removed)."""
+    if message.encoding not in MONO_ENCODINGS:
+        raise DatasetFormatError(
+            f"{where}: image encoding {message.encoding!r}, expected one of {MONO_ENCODINGS}"
+        )
+    data = np.asarray(message.data, dtype=np.uint8)
+    height, width, step = int(message.height), int(message.width), int(message.step)
+    if step < width or data.size < height * step:
+        raise DatasetFormatError(
+            f"{where}: image of {height} x {width} (step {step}) holds only {data.size} bytes"
+        )
+    return data[: height * step].reshape(height, step)[:, :width]
+
+
+class BagSequence:
+    """A radar sequence recorded in a ROS bag.
+
+    Args:
+        path: a ROS 1 `.bag` file or a ROS 2 bag folder.
+        topic: the scan topic; None takes the only mono8 / 8UC1 image topic.
+        gt_topic: an Odometry or PoseStamped topic with ground truth; None uses the one named by
+            the bag's scan info, if any.
+        layout: preset name (see `LAYOUT_PRESETS`); None uses the bag's scan info, else "navtech".
+        rows, azimuth_direction, range_resolution_m: override the layout's values.
+
+    Raises:
+        DatasetNotFoundError: the path does not exist or a named topic is not in the bag.
+        DatasetFormatError: unreadable bag, no or several candidate image topics, no scans,
+            or repeated scan stamps.
+    """
+
+    family: str = ROSBAG_FAMILY
+
+    def __init__(
+        self,
+        path: Path,
+        topic: str | None = None,
+        gt_topic: str | None = None,
+        layout: str | None = None,
+        rows: Rows | None = None,
+        azimuth_direction: Direction | None = None,
+        range_resolution_m: float | None = None,
+    ) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise DatasetNotFoundError(f"{self.path}: bag not found")
+        self.name: str = self.path.stem if self.path.is_file() else self.path.name
+        self._reader = self._open()
+        info = self._scan_info()
+        base = LAYOUT_PRESETS.get(str(info.get("layout"))) if info else None
+        if base is not None and "range_resolution_m" in info:
+            base = replace(base, range_resolution_m=float(info["range_resolution_m"]))
+        self.layout = resolve_layout(layout, rows, azimuth_direction, range_resolution_m, base)
+        self.sensor = str(info.get("sensor", ROSBAG_SENSOR))
+        self.topic = topic or info.get("scan_topic") or self._default_topic()
+        self._connections = self._topic_connections(self.topic, (IMAGE_TYPE,))
+        self.gt_topic: str | None = gt_topic or info.get("gt_topic")
+        self._index_scans()
+
+    # -- opening ------------------------------------------------------------------------------
+    def _open(self) -> AnyReader:
+        reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        try:
+            reader.open()
+        except (AnyReaderError, OSError, ValueError) as exc:
+            raise DatasetFormatError(f"{self.path}: cannot read the bag ({exc})") from exc
+        return reader
+
+    def _decode(self, raw: bytes, msgtype: str) -> Any:
+        """A deserialised message (rosbags builds its classes at run time, hence Any)."""
+        return self._reader.deserialize(raw, msgtype)
+
+    def _scan_info(self) -> dict[str, Any]:
+        connections = [c for c in self._reader.connections if c.topic == SCAN_INFO_TOPIC]
+        if not connections:  # (rosbags reads every topic when given no connections)
+            return {}
+        for _, _, raw in self._reader.messages(connections=connections):
+            message = self._decode(raw, connections[0].msgtype)
+            try:
+                info = json.loads(message.data)
+            except json.JSONDecodeError as exc:
+                raise DatasetFormatError(f"{self.path}: {SCAN_INFO_TOPIC} is not JSON") from exc
+            return info if isinstance(info, dict) else {}
+        return {}
+
+    def _topic_connections(self, topic: str, types: tuple[str, ...]) -> list[Connection]:
+        connections = [c for c in self._reader.connections if c.topic == topic]
+        if not connections:
+            known = ", ".join(sorted({c.topic for c in self._reader.connections}))
+            raise DatasetNotFoundError(f"{self.path}: no topic {topic!r} (topics: {known})")
+        if any(c.msgtype not in types for c in connections):
+            raise DatasetFormatError(
+                f"{self.path}: topic {topic} has type {connections[0].msgtype}, expected "
+                f"{' or '.join(types)}"
+            )
+        return connections
+
+    def _default_topic(self) -> str:
+        """The only image topic whose first message is mono8 / 8UC1."""
+        candidates = []
+        connections = self._reader.connections
+        image_topics = sorted({c.topic for c in connections if c.msgtype == IMAGE_TYPE})
+        for topic in image_topics:
+            chosen = [c for c in connections if c.topic == topic]
+            for connection, _, raw in self._reader.messages(connections=chosen):
+                message = self._decode(raw, connection.msgtype)
+                if message.encoding in MONO_ENCODINGS:
+                    candidates.append(topic)
+                break
+        if len(candidates) != 1:
+            found = ", ".join(candidates) if candidates else "none"
+            raise DatasetFormatError(
+                f"{self.path}: {len(candidates)} mono8 image topics ({found}); choose one with "
+                "--topic (or dataset.topic)"
+            )
+        return candidates[0]
+
+    def _index_scans(self) -> None:
+        """One pass over the scan topic: header stamps and where each message is."""
+        stamps: list[int] = []
+        places: list[tuple[int, int]] = []  # (bag time, rank among messages at that bag time)
+        previous, rank = -1, 0
+        for connection, bag_time, raw in self._reader.messages(connections=self._connections):
+            message = self._decode(raw, connection.msgtype)
+            rank = rank + 1 if bag_time == previous else 0
+            previous = bag_time
+            stamps.append(stamp_ns(message.header))
+            places.append((bag_time, rank))
+        if not stamps:
+            raise DatasetFormatError(f"{self.path}: topic {self.topic} has no messages")
+        order = np.argsort(np.array(stamps, dtype=np.int64), kind="stable")
+        self._times_ns = np.array(stamps, dtype=np.int64)[order]
+        self._places = [places[i] for i in order]
+        repeated = np.flatnonzero(np.diff(self._times_ns) == 0)
+        if repeated.size:
+            raise DatasetFormatError(
+                f"{self.path}: two scans on {self.topic} share the stamp "
+                f"{self._times_ns[repeated[0]]} ns"
+            )
+        self._times_ns.flags.writeable = False
+
+    # -- the sequence protocol ----------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self._places)
+
+    def __getitem__(self, index: int) -> RadarFrame:
+        """Read scan `index` (negative indices count from the end).
+
+        Raises:
+            IndexError: index out of range.
+            DatasetFormatError: a message that is not a mono8 image of the layout.
+        """
+        index = frame_index(index, len(self))
+        bag_time, rank = self._places[index]
+        messages = self._reader.messages(
+            connections=self._connections, start=bag_time, stop=bag_time + 1
+        )
+        for position, (connection, _, raw) in enumerate(messages):
+            if position == rank:
+                message = self._decode(raw, connection.msgtype)
+                break
+        else:
+            raise DatasetFormatError(f"{self.path}: scan {index} vanished from {self.topic}")
+        where = Path(f"{self.path}:{self.topic}[{index}]")
+        image = image_array(message, str(where))
+        if self.layout.oxford_header and image.shape[1] <= OXFORD_HEADER_BYTES:
+            raise DatasetFormatError(f"{where}: image too narrow for the Oxford-form header")
+        polar, azimuths, times = self.layout.decode(image, where)
+        return RadarFrame(
+            timestamp_ns=int(self._times_ns[index]),
+            polar=polar,
+            azimuths_rad=azimuths,
+            range_resolution_m=self.layout.range_resolution_m,
+            sensor=self.sensor,
+            azimuth_times_ns=times if times is not None and np.any(times) else None,
+        )
+
+    @property
+    def timestamps_ns(self) -> NDArray[np.int64]:
+        """(N,) int64 scan times [ns] (image header stamps), increasing; read-only."""
+        return self._times_ns
+
+    @cached_property
+    def ground_truth(self) -> NDArray[np.float64] | None:
+        """(N, 3) poses (x, y, yaw) from `gt_topic` at the scan times; None without a GT topic."""
+        if self.gt_topic is None:
+            return None
+        connections = self._topic_connections(self.gt_topic, GT_TYPES)
+        times: list[int] = []
+        poses: list[tuple[float, float, float]] = []
+        for connection, _, raw in self._reader.messages(connections=connections):
+            message = self._decode(raw, connection.msgtype)
+            pose = message.pose.pose if connection.msgtype == GT_TYPES[0] else message.pose
+            q = pose.orientation
+            yaw = float(yaw_from_quaternion([q.x, q.y, q.z, q.w]))
+            times.append(stamp_ns(message.header))
+            poses.append((pose.position.x, pose.position.y, yaw))
+        if not times:
+            raise DatasetFormatError(f"{self.path}: ground-truth topic {self.gt_topic} is empty")
+        order = np.argsort(np.array(times, dtype=np.int64), kind="stable")
+        stamps = np.array(times, dtype=np.int64)[order]
+        keep = np.concatenate([[True], np.diff(stamps) > 0])
+        return interpolate_poses(stamps[keep], np.array(poses)[order][keep], self._times_ns)
+
+    def close(self) -> None:
+        """Close the bag (further frame reads fail)."""
+        self._reader.close()
+
+    def __repr__(self) -> str:
+        return f"BagSequence({str(self.path)!r}, topic={self.topic!r}, frames={len(self)})"
+
+
+ROSBAG = register(
+    Family(
+        name=ROSBAG_FAMILY,
+        open=BagSequence,
+        detect=is_bag,
+        layout=ROSBAG_LAYOUT,
+        obtain=ROSBAG_OBTAIN,
+        options=(
+            "range_resolution_m",
+            "topic",
+            "gt_topic",
+            "layout",
+            "rows",
+            "azimuth_direction",
+        ),
+    )
+)

@@ -1,0 +1,168 @@
+"""Settings of the loop-closing stage (the `loop_closure` section of a radar-slam config)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from odometry import OdometryConfig
+from raplace import checks
+from raplace.config import RaPlaceConfig
+
+CHI2_3DOF_99 = 11.345
+"""Chi-square quantile at 99 % for 3 degrees of freedom (x, y, yaw)."""
+
+
+@dataclass(frozen=True)
+class VerificationConfig:
+    """When a proposed loop passes the geometric verification.
+
+    Attributes:
+        min_sinogram_quality: minimum normalised correlation of the two images aligned by the
+            sinogram estimate (`RelativePose.quality`, about 1 for the same place, 0 unrelated).
+        min_inlier_fraction: minimum fraction of sinogram angles whose shift fits the translation.
+        max_translation_m: the two scans may be at most this far apart [m] (beyond, too little
+            overlap for a reliable registration).
+        min_refined_quality: minimum peak-to-noise ratio of the phase-correlation refinement
+            (the odometry's own registrations fail below `odometry.quality.min_peak_quality`).
+        max_disagreement_m: the sinogram and phase-correlation translations may differ by this
+            much [m].
+        max_disagreement_deg: ... and their rotations by this much [deg].
+    """
+
+    min_sinogram_quality: float = 0.25
+    min_inlier_fraction: float = 0.5
+    max_translation_m: float = 15.0
+    min_refined_quality: float = 12.0
+    max_disagreement_m: float = 1.5
+    max_disagreement_deg: float = 3.0
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.finite("min_sinogram_quality", self.min_sinogram_quality)
+        checks.in_range("min_inlier_fraction", self.min_inlier_fraction, 0.0, 1.0)
+        checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
+        checks.non_negative("min_refined_quality", self.min_refined_quality)
+        checks.positive("max_disagreement_m", self.max_disagreement_m, allow_inf=True)
+        checks.positive("max_disagreement_deg", self.max_disagreement_deg, allow_inf=True)
+
+
+@dataclass(frozen=True)
+class LoopCovarianceConfig:
+    """Covariance of a verified loop from its verification.
+
+    cov = sigma_scale^2 * C_peak + diag(d_xy^2, d_xy^2, d_yaw^2) * disagreement_weight^2
+          + diag(min_sigma_xy^2, min_sigma_xy^2, min_sigma_yaw^2),
+    C_peak the phase-correlation covariance (peak width squared over peak-to-noise squared,
+    `odometry.registration`), (d_xy, d_yaw) the sinogram / phase-correlation disagreement.
+
+    Attributes:
+        sigma_scale: multiplies the peak-derived standard deviations.
+        disagreement_weight: weight of the disagreement term.
+        min_sigma_xy_m: floor of the translation standard deviation [m].
+        min_sigma_yaw_deg: floor of the rotation standard deviation [deg].
+    """
+
+    sigma_scale: float = 1.0
+    disagreement_weight: float = 0.2
+    min_sigma_xy_m: float = 0.05
+    min_sigma_yaw_deg: float = 0.1
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.positive("sigma_scale", self.sigma_scale)
+        checks.non_negative("disagreement_weight", self.disagreement_weight)
+        checks.positive("min_sigma_xy_m", self.min_sigma_xy_m)
+        checks.positive("min_sigma_yaw_deg", self.min_sigma_yaw_deg)
+
+
+@dataclass(frozen=True)
+class ConsistencyConfig:
+    """Pairwise consistency of verified loops (used when the detector is given poses).
+
+    The odometry between two scans a path length P apart is modelled with standard deviations
+    drift_fraction * P + min_sigma_xy_m (x and y) and drift_deg_per_m * P + min_sigma_yaw_deg.
+
+    Attributes:
+        min_support: other consistent loops a loop needs before it is accepted (0 accepts every
+            verified loop that does not contradict the accepted ones nearby).
+        window_m: loops support each other when their queries and their matches each lie within
+            this path distance [m]; a pending loop is rejected once the query has travelled this
+            far past it without support.
+        chi2_threshold: two loops agree when the squared Mahalanobis distance of their cycle is
+            below this (3 dof; 11.345 is the 99 % quantile).
+        drift_fraction: odometry translation error per metre travelled (2 %: twice a typical
+            radar odometry drift; 5 % let pairs of random false loops agree by chance).
+        drift_deg_per_m: odometry rotation error per metre travelled [deg/m].
+        min_sigma_xy_m: translation standard deviation of a zero-length segment [m].
+        min_sigma_yaw_deg: rotation standard deviation of a zero-length segment [deg].
+    """
+
+    min_support: int = 1
+    window_m: float = 60.0
+    chi2_threshold: float = CHI2_3DOF_99
+    drift_fraction: float = 0.02
+    drift_deg_per_m: float = 0.05
+    min_sigma_xy_m: float = 0.1
+    min_sigma_yaw_deg: float = 0.2
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.at_least("min_support", self.min_support, 0)
+        checks.positive("window_m", self.window_m)
+        checks.positive("chi2_threshold", self.chi2_threshold)
+        checks.non_negative("drift_fraction", self.drift_fraction)
+        checks.non_negative("drift_deg_per_m", self.drift_deg_per_m)
+        checks.positive("min_sigma_xy_m", self.min_sigma_xy_m)
+        checks.positive("min_sigma_yaw_deg", self.min_sigma_yaw_deg)
+
+
+LOOP_POSE_N_THETA = 120
+"""Sinogram angles of the loop verifier's pose estimate (RaPlace's default 180 is 1.6x slower for
+the same result once phase correlation refines it)."""
+LOOP_POSE_PAD_FACTOR = 1
+"""Zero padding of its spectra: shifts are found modulo 128 m, ample for loops under
+`VerificationConfig.max_translation_m` (2 is about twice as slow)."""
+
+
+def _raplace_defaults() -> RaPlaceConfig:
+    base = RaPlaceConfig()
+    pose = dataclasses.replace(
+        base.pose, n_theta=LOOP_POSE_N_THETA, pad_factor=LOOP_POSE_PAD_FACTOR
+    )
+    return dataclasses.replace(base, pose=pose)
+
+
+@dataclass(frozen=True)
+class LoopClosureConfig:
+    """The loop-closing stage's settings (the `loop_closure` section of a radar-slam config).
+
+    Attributes:
+        enabled: False replaces the detector by one that does nothing (`--no-loops`).
+        raplace: descriptor, database (exclusion of recent entries), and sinogram-pose settings.
+            RaPlace's own `retrieval.loop_threshold` (for precision-recall) is not used here.
+        refinement: phase-correlation settings of the refinement (`odometry.registration`).
+        candidates: database matches requested per query (k).
+        loops_per_query: verification of a query's candidates stops once this many passed.
+        max_descriptor_distance: a match is proposed for verification below this RaPlace distance
+            (looser than a precision-oriented threshold: verification rejects the wrong ones).
+        query_spacing_m: with poses, a scan enters the database and queries it once the path
+            since the previous entry reaches this [m] (0: every scan); without poses, every scan.
+        verification: geometric verification thresholds.
+        covariance: covariance model of verified loops.
+        consistency: pairwise consistency of verified loops.
+    """
+
+    enabled: bool = True
+    raplace: RaPlaceConfig = field(default_factory=_raplace_defaults)
+    refinement: OdometryConfig = field(default_factory=OdometryConfig)
+    candidates: int = 2
+    loops_per_query: int = 1
+    max_descriptor_distance: float = 0.25
+    query_spacing_m: float = 4.0
+    verification: VerificationConfig = field(default_factory=VerificationConfig)
+    covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
+    consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.at_least("candidates", self.candidates, 1)
+        checks.at_least("loops_per_query", self.loops_per_query, 1)
+        checks.positive("max_descriptor_distance", self.max_descriptor_distance)
+        checks.non_negative("query_spacing_m", self.query_spacing_m)

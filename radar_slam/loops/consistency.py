@@ -1,0 +1,176 @@
+"""Pairwise consistency of verified loops: two loops nearby must close a cycle with the odometry.
+
+Two loops (qa, ma, za) and (qb, mb, zb) agree when za * T_ma_mb = T_qa_qb * zb within the
+covariance of the two loops and of the odometry segments between their queries and between their
+matches (which grows with the segments' length). A loop is accepted once `min_support` other loops
+agree with it; until then it is pending; it is rejected when it contradicts every accepted loop
+nearby, or when the query has moved `window_m` on without support.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from radar_slam.loops.config import ConsistencyConfig
+from radar_slam.loops.records import LoopStatus, VerifiedLoop
+from raplace.se2 import adjoint, between, compose, wrap_angle
+
+FloatArray = NDArray[np.float64]
+POSE_DIM = 3
+
+
+def odometry_segment_covariance(path_m: ArrayLike, cfg: ConsistencyConfig) -> FloatArray:
+    """(..., 3, 3) diagonal covariance of odometry segments `path_m` (...) metres long."""
+    length = np.abs(np.asarray(path_m, dtype=np.float64))
+    sigma_xy = cfg.drift_fraction * length + cfg.min_sigma_xy_m
+    sigma_yaw = np.deg2rad(cfg.drift_deg_per_m * length + cfg.min_sigma_yaw_deg)
+    cov = np.zeros(length.shape + (POSE_DIM, POSE_DIM))
+    cov[..., 0, 0] = cov[..., 1, 1] = sigma_xy**2
+    cov[..., 2, 2] = sigma_yaw**2
+    return cov
+
+
+def cycle_mahalanobis(
+    loop: VerifiedLoop, others: list[VerifiedLoop], cfg: ConsistencyConfig
+) -> FloatArray:
+    """Squared Mahalanobis distances (n,) of the cycles closed by `loop` with each of `others`.
+
+    For loops a (qa, ma, za) and b (qb, mb, zb) the cycle error is
+    e = Log((za T_ma_mb)^-1 (T_qa_qb zb)) with T_ma_mb, T_qa_qb from the odometry poses. To first
+    order its covariance is Ad(T_ma_mb^-1) S_za Ad^T + S_ma_mb + Ad(zb^-1) S_qa_qb Ad^T + S_zb,
+    the odometry segments' covariances from `odometry_segment_covariance`. Vectorised over
+    `others`; Log is taken as (x, y, wrapped yaw) (the cycle is near the identity when it
+    matters).
+    """
+    if not others:
+        return np.zeros(0)
+    za = np.stack([o.measurement for o in others])  # (n, 3)
+    sa = np.stack([o.covariance for o in others])
+    qa = np.stack([o.query_pose for o in others])
+    ma = np.stack([o.match_pose for o in others])
+    path_q = loop.query_path_m - np.array([o.query_path_m for o in others])
+    path_m = loop.match_path_m - np.array([o.match_path_m for o in others])
+    zb = np.asarray(loop.measurement, dtype=np.float64)
+    sb = np.asarray(loop.covariance, dtype=np.float64)
+    t_ma_mb = between(ma, loop.match_pose)  # (n, 3)
+    t_qa_qb = between(qa, loop.query_pose)
+    error = between(compose(za, t_ma_mb), compose(t_qa_qb, zb))  # (n, 3)
+    error[:, 2] = wrap_angle(error[:, 2])
+    ad_m = adjoint(between(t_ma_mb, np.zeros(3)))  # Ad(T_ma_mb^-1)
+    ad_zb = adjoint(between(zb, np.zeros(3)))  # Ad(zb^-1)
+    cov = (
+        ad_m @ sa @ np.swapaxes(ad_m, -1, -2)
+        + odometry_segment_covariance(path_m, cfg)
+        + ad_zb @ odometry_segment_covariance(path_q, cfg) @ ad_zb.T
+        + sb
+    )
+    solved = np.linalg.solve(cov, error[..., None])[..., 0]
+    return np.einsum("ni,ni->n", error, solved)
+
+
+class ConsistencyGate:
+    """Accepts verified loops once enough nearby loops agree with them (see the module docstring).
+
+    `add(loop)` returns the decisions (indices) resolved by that loop: accepted (it and any
+    pending loop it supports) or rejected; `expire(path_m)` rejects pending loops left behind;
+    `finish()` rejects every pending loop.
+    """
+
+    def __init__(self, cfg: ConsistencyConfig) -> None:
+        self.cfg = cfg
+        self._loops: list[VerifiedLoop] = []
+        self._status: list[LoopStatus] = []
+        self._support: list[set[int]] = []  # per loop: decisions of the loops agreeing with it
+        self._pending: list[int] = []  # positions of the pending loops
+        self.reasons: dict[int, str] = {}  # decision -> reason of its latest status
+
+    def __len__(self) -> int:
+        return len(self._loops)
+
+    def add(self, loop: VerifiedLoop) -> dict[int, LoopStatus]:
+        """Check a verified loop against the pending and accepted ones nearby.
+
+        Returns:
+            decision -> new status of every loop whose status this call set (`loop` included).
+        """
+        cfg = self.cfg
+        live = [
+            n
+            for n, other in enumerate(self._loops)
+            if self._status[n] != "rejected"
+            and other.query_key != loop.query_key
+            and abs(loop.query_path_m - other.query_path_m) <= cfg.window_m
+            and abs(loop.match_path_m - other.match_path_m) <= cfg.window_m
+        ]
+        d2 = cycle_mahalanobis(loop, [self._loops[n] for n in live], cfg)
+        agree = [n for n, d in zip(live, d2, strict=True) if d <= cfg.chi2_threshold]
+        accepted_near = [n for n in live if self._status[n] == "accepted"]
+        accepted_agree = [n for n in agree if self._status[n] == "accepted"]
+
+        index = len(self._loops)
+        self._loops.append(loop)
+        self._support.append({self._loops[n].decision for n in agree})
+        changes: dict[int, LoopStatus] = {}
+        if accepted_near and not accepted_agree:
+            worst = float(np.min(d2[[live.index(n) for n in accepted_near]]))
+            self._set(
+                index,
+                "rejected",
+                f"inconsistent with {len(accepted_near)} accepted loop(s) nearby "
+                f"(best cycle d2 {worst:.1f} > {cfg.chi2_threshold:.1f})",
+                changes,
+            )
+            return changes
+        if len(agree) >= cfg.min_support:
+            self._set(index, "accepted", f"consistent with {len(agree)} loop(s)", changes)
+            for n in agree:
+                self._support[n].add(loop.decision)
+                if self._status[n] == "pending" and len(self._support[n]) >= cfg.min_support:
+                    self._set(
+                        n, "accepted", f"consistent with {len(self._support[n])} loop(s)", changes
+                    )
+        else:
+            self._set(
+                index,
+                "pending",
+                f"waiting for support ({len(agree)} of {cfg.min_support} consistent loops)",
+                changes,
+            )
+            for n in agree:
+                self._support[n].add(loop.decision)
+        return changes
+
+    def expire(self, path_m: float) -> dict[int, LoopStatus]:
+        """Reject the pending loops whose query lies more than `window_m` behind `path_m`."""
+        changes: dict[int, LoopStatus] = {}
+        for n in list(self._pending):
+            if path_m - self._loops[n].query_path_m > self.cfg.window_m:
+                self._set(n, "rejected", self._unsupported(n), changes)
+        return changes
+
+    def finish(self) -> dict[int, LoopStatus]:
+        """Reject every loop still pending (end of the sequence)."""
+        changes: dict[int, LoopStatus] = {}
+        for n in list(self._pending):
+            self._set(n, "rejected", self._unsupported(n) + " by the end", changes)
+        return changes
+
+    def _unsupported(self, n: int) -> str:
+        return (
+            f"unsupported: {len(self._support[n])} of {self.cfg.min_support} consistent loops "
+            f"within {self.cfg.window_m:.0f} m"
+        )
+
+    def _set(self, n: int, status: LoopStatus, reason: str, changes: dict[int, LoopStatus]) -> None:
+        if n == len(self._status):
+            self._status.append(status)
+        else:
+            if self._status[n] == "pending":
+                self._pending.remove(n)
+            self._status[n] = status
+        if status == "pending":
+            self._pending.append(n)
+        decision = self._loops[n].decision
+        self.reasons[decision] = reason
+        changes[decision] = status

@@ -1,0 +1,373 @@
+"""The loop detector: RaPlace candidates, geometric verification, pairwise consistency.
+
+For every database scan (one every `query_spacing_m` of travel when poses are given, else every
+scan) the `LoopDetector` queries the place database for `candidates` matches and proposes those
+below `max_descriptor_distance`, verifies each proposal, best first, until one passes
+(`radar_slam.loops.verification`), and, with poses, accepts a verified loop once another loop
+nearby agrees with it (`radar_slam.loops.consistency`). Every verified proposal becomes a
+`LoopDecision` with its reason. `NullLoopDetector` has the same interface and does nothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from odometry.deskew import twist_from_motion
+from odometry.scan import Scan
+from radar_slam.loops.config import LoopClosureConfig
+from radar_slam.loops.consistency import ConsistencyGate
+from radar_slam.loops.records import (
+    KeyScan,
+    LoopClosureError,
+    LoopConstraint,
+    LoopDecision,
+    LoopStatus,
+    VerifiedLoop,
+)
+from radar_slam.loops.verification import GeometricVerifier, Verifier
+from raplace.descriptor import DescriptorExtractor
+from raplace.retrieval import PlaceRecognizer, Recognizer
+from raplace.se2 import between
+from raplace.units import NS_PER_S
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+POSE_DIM = 3
+
+
+class LoopDetectorProtocol(Protocol):
+    """What the pipeline needs from a loop detector (`LoopDetector` or `NullLoopDetector`)."""
+
+    def add(
+        self, scan: Scan, pose: ArrayLike | None = None, key: int | None = None
+    ) -> list[LoopConstraint]: ...
+
+    def finish(self) -> list[LoopConstraint]: ...
+
+    def reject(self, decision: int, reason: str) -> None: ...
+
+    def tally(self) -> tuple[int, int]: ...
+
+    @property
+    def decisions(self) -> list[LoopDecision]: ...
+
+    @property
+    def proposed(self) -> int: ...
+
+
+@dataclass
+class _Track:
+    """The detector's running state over the scans fed so far."""
+
+    count: int = 0
+    last_key: int | None = None
+    last_time_ns: int | None = None
+    last_pose: FloatArray | None = None
+    path_m: float = 0.0
+    path_at_last_entry_m: float = -np.inf
+    with_poses: bool | None = None
+
+
+@dataclass(frozen=True)
+class _Entry:
+    """What the detector keeps per database scan (the scan itself only without a loader)."""
+
+    key: int
+    timestamp_ns: int
+    pose: FloatArray | None
+    path_m: float
+    twist: FloatArray | None
+    scan: Scan | None
+
+
+class LoopDetector:
+    """Verified radar loop closures from a stream of scans (and optionally their poses).
+
+    Usable on its own (no radar_slam graph needed): feed every scan in time order with `add`;
+    each call returns the loop constraints accepted by it (T_query_match with covariance, keys
+    = the scans' keys), ready for `radar_slam.graph.add_loop_factors` or any back end. Call
+    `finish()` after the last scan.
+
+    Args:
+        config: loop-closing settings (defaults when None).
+        scan_loader: returns the scan of a key again when it is needed for verification; without
+            it the detector keeps every database scan in memory (about 1.3 MB per MulRan scan).
+        recognizer: the place database (default: RaPlace `PlaceRecognizer`).
+        verifier: the geometric verifier (default: `GeometricVerifier`).
+
+    Poses are the caller's odometry T_world_scan (3,) of each scan: with them, database entries
+    are spaced by travelled distance, scans are de-skewed with the velocity they imply, and
+    verified loops must be consistent with each other (`ConsistencyGate`); without them every
+    verified loop is accepted. Give poses for every scan or for none.
+    """
+
+    def __init__(
+        self,
+        config: LoopClosureConfig | None = None,
+        scan_loader: Callable[[int], Scan] | None = None,
+        *,
+        recognizer: Recognizer | None = None,
+        verifier: Verifier | None = None,
+    ) -> None:
+        self.config = LoopClosureConfig() if config is None else config
+        cfg = self.config
+        self.scan_loader = scan_loader
+        self.describe = DescriptorExtractor(cfg.raplace.descriptor)
+        self.recognizer: Recognizer = (
+            PlaceRecognizer(cfg.raplace.retrieval) if recognizer is None else recognizer
+        )
+        self.verifier: Verifier = GeometricVerifier(cfg) if verifier is None else verifier
+        self.gate = ConsistencyGate(cfg.consistency)
+        self._entries: dict[int, _Entry] = {}
+        self._decisions: list[LoopDecision] = []
+        self._tally: Counter[str] = Counter()
+        self._track = _Track()
+        self.proposed = 0
+
+    # -- results ------------------------------------------------------------------------------
+    @property
+    def decisions(self) -> list[LoopDecision]:
+        """Every verified proposal so far, in the order verified, with its current status."""
+        return list(self._decisions)
+
+    def tally(self) -> tuple[int, int]:
+        """(accepted, rejected) decisions so far (cheap: kept up to date)."""
+        return self._tally["accepted"], self._tally["rejected"]
+
+    @property
+    def accepted_constraints(self) -> list[LoopConstraint]:
+        """The accepted loops as constraints."""
+        return [d.constraint() for d in self._decisions if d.accepted]
+
+    def __len__(self) -> int:
+        """Number of database scans."""
+        return len(self._entries)
+
+    # -- the per-scan step --------------------------------------------------------------------
+    def add(
+        self, scan: Scan, pose: ArrayLike | None = None, key: int | None = None
+    ) -> list[LoopConstraint]:
+        """Feed the next scan (time order); returns the loops accepted by this call.
+
+        Args:
+            scan: the scan (any object with the `odometry.Scan` attributes).
+            pose: (3,) odometry pose T_world_scan, or None (then for every scan).
+            key: the scan's key in the loop constraints (default: number of scans fed before).
+
+        Raises:
+            LoopClosureError: poses given for some scans only, a key reused, or time going back.
+        """
+        track = self._track
+        key = track.count if key is None else int(key)
+        pose_arr = self._check(scan, pose, key)
+        twist = self._advance(scan, pose_arr, key)
+        changes: dict[int, LoopStatus] = {}
+        if pose_arr is not None:
+            changes.update(self.gate.expire(track.path_m))
+        if track.path_m - track.path_at_last_entry_m >= self.config.query_spacing_m or (
+            pose_arr is None
+        ):
+            track.path_at_last_entry_m = track.path_m
+            changes.update(self._query_and_insert(scan, pose_arr, key, twist))
+        return self._apply(changes)
+
+    def finish(self) -> list[LoopConstraint]:
+        """Resolve the loops still pending (rejected: no support); returns [] (for symmetry)."""
+        return self._apply(self.gate.finish())
+
+    def reject(self, decision: int, reason: str) -> None:
+        """Mark an accepted loop as rejected afterwards (e.g. by the back end's GNC pass)."""
+        self._record(decision, status="rejected", reason=reason)
+
+    def _record(self, decision: int, **changes: object) -> LoopDecision:
+        """Replace fields of decision `decision` (appended when new), keeping the tally."""
+        if decision == len(self._decisions):
+            new = LoopDecision(**changes)  # type: ignore[arg-type]
+            self._decisions.append(new)
+        else:
+            self._tally[self._decisions[decision].status] -= 1
+            new = dataclasses.replace(self._decisions[decision], **changes)  # type: ignore[arg-type]
+            self._decisions[decision] = new
+        self._tally[new.status] += 1
+        return new
+
+    # -- helpers ------------------------------------------------------------------------------
+    def _check(self, scan: Scan, pose: ArrayLike | None, key: int) -> FloatArray | None:
+        track = self._track
+        with_pose = pose is not None
+        if track.with_poses is not None and with_pose != track.with_poses:
+            raise LoopClosureError(
+                f"scan {key}: give a pose for every scan or for none (the first scan "
+                f"{'had' if track.with_poses else 'had no'} pose)"
+            )
+        if track.last_key is not None and key <= track.last_key:
+            raise LoopClosureError(
+                f"scan key {key} does not follow the previous key {track.last_key} (keys increase)"
+            )
+        if track.last_time_ns is not None and int(scan.timestamp_ns) <= track.last_time_ns:
+            raise LoopClosureError(
+                f"scan {key} at {scan.timestamp_ns} ns is not later than the previous scan"
+            )
+        if pose is None:
+            return None
+        arr = np.asarray(pose, dtype=np.float64).reshape(-1)
+        if arr.shape != (POSE_DIM,) or not np.all(np.isfinite(arr)):
+            raise LoopClosureError(f"scan {key}: pose must be 3 finite numbers, got {pose!r}")
+        return arr
+
+    def _advance(self, scan: Scan, pose: FloatArray | None, key: int) -> FloatArray | None:
+        """Update the running path and return the scan's body twist (None without poses)."""
+        track = self._track
+        twist = None
+        if pose is not None and track.last_pose is not None and track.last_time_ns is not None:
+            motion = between(track.last_pose, pose)
+            track.path_m += float(np.hypot(motion[0], motion[1]))
+            dt_s = (int(scan.timestamp_ns) - track.last_time_ns) / NS_PER_S
+            twist = twist_from_motion(motion, dt_s)
+        previous = self._entries.get(track.last_key) if track.last_key is not None else None
+        if twist is not None and previous is not None and previous.twist is None:
+            # The first scan had no velocity yet: de-skew it with the one that follows.
+            self._entries[previous.key] = dataclasses.replace(previous, twist=twist)
+        track.with_poses = pose is not None
+        track.last_pose = pose
+        track.last_time_ns = int(scan.timestamp_ns)
+        track.last_key = key
+        track.count += 1
+        return twist
+
+    def _scan_of(self, entry: _Entry) -> Scan:
+        if entry.scan is not None:
+            return entry.scan
+        assert self.scan_loader is not None
+        return self.scan_loader(entry.key)
+
+    def _query_and_insert(
+        self, scan: Scan, pose: FloatArray | None, key: int, twist: FloatArray | None
+    ) -> dict[int, LoopStatus]:
+        cfg = self.config
+        time_s = int(scan.timestamp_ns) / NS_PER_S
+        descriptor = self.describe(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
+        candidates = [
+            c
+            for c in self.recognizer.query(descriptor, cfg.candidates, time_s)
+            if c.distance < cfg.max_descriptor_distance and c.key in self._entries
+        ]
+        self.recognizer.add(descriptor, key, time_s)
+        entry = _Entry(
+            key=key,
+            timestamp_ns=int(scan.timestamp_ns),
+            pose=pose,
+            path_m=self._track.path_m,
+            twist=twist,
+            scan=None if self.scan_loader is not None else scan,
+        )
+        self._entries[key] = entry
+        self.proposed += len(candidates)
+        query = KeyScan(key, entry.timestamp_ns, scan, twist)
+        changes: dict[int, LoopStatus] = {}
+        passed = 0
+        for candidate in candidates:  # at most `candidates` (k), best first
+            match = self._entries[candidate.key]
+            result = self.verifier(
+                query, KeyScan(match.key, match.timestamp_ns, self._scan_of(match), match.twist)
+            )
+            decision = len(self._decisions)
+            self._record(
+                decision,
+                query_key=key,
+                match_key=match.key,
+                query_ns=entry.timestamp_ns,
+                match_ns=match.timestamp_ns,
+                distance=candidate.distance,
+                measurement=np.asarray(result.measurement, dtype=np.float64),
+                covariance=np.asarray(result.covariance, dtype=np.float64),
+                sinogram_quality=result.sinogram_quality,
+                refined_quality=result.refined_quality,
+                status="rejected" if not result.ok else "pending",
+                reason=result.reason,
+            )
+            log.debug(
+                "loop %d -> %d (distance %.3f): %s",
+                key,
+                match.key,
+                candidate.distance,
+                result.reason or "verified",
+            )
+            if not result.ok:
+                continue
+            passed += 1
+            if pose is None or match.pose is None:
+                changes[decision] = "accepted"
+                self.gate.reasons[decision] = "accepted (no poses: consistency not checked)"
+            else:
+                changes.update(
+                    self.gate.add(
+                        VerifiedLoop(
+                            decision=decision,
+                            query_key=key,
+                            match_key=match.key,
+                            measurement=result.measurement,
+                            covariance=result.covariance,
+                            query_pose=pose,
+                            match_pose=match.pose,
+                            query_path_m=entry.path_m,
+                            match_path_m=match.path_m,
+                        )
+                    )
+                )
+            if passed >= cfg.loops_per_query:
+                break
+        return changes
+
+    def _apply(self, changes: dict[int, LoopStatus]) -> list[LoopConstraint]:
+        """Record status changes; return the newly accepted loops as constraints."""
+        accepted = []
+        for decision, status in sorted(changes.items()):
+            new = self._record(decision, status=status, reason=self.gate.reasons[decision])
+            if status == "accepted":
+                accepted.append(new.constraint())
+        return accepted
+
+
+class NullLoopDetector:
+    """A loop detector that never finds a loop (loop closing disabled)."""
+
+    def __init__(self, config: LoopClosureConfig | None = None) -> None:
+        self.config = LoopClosureConfig(enabled=False) if config is None else config
+        self.proposed = 0
+
+    @property
+    def decisions(self) -> list[LoopDecision]:
+        return []
+
+    def tally(self) -> tuple[int, int]:
+        return 0, 0
+
+    def add(
+        self, scan: Scan, pose: ArrayLike | None = None, key: int | None = None
+    ) -> list[LoopConstraint]:
+        return []
+
+    def finish(self) -> list[LoopConstraint]:
+        return []
+
+    def reject(self, decision: int, reason: str) -> None:
+        raise LoopClosureError(f"no loop decision {decision}: loop closing is disabled")
+
+
+def make_loop_detector(
+    config: LoopClosureConfig, scan_loader: Callable[[int], Scan] | None = None
+) -> LoopDetector | NullLoopDetector:
+    """The configured detector: `LoopDetector`, or `NullLoopDetector` when disabled."""
+    if not config.enabled:
+        return NullLoopDetector(config)
+    return LoopDetector(config, scan_loader)

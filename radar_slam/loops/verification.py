@@ -1,0 +1,211 @@
+"""Geometric verification of a proposed loop: sinogram relative pose, refined by phase correlation.
+
+a. the relative pose from the two sinogram spectra (`raplace.pose`), moved from the scans' mean
+   acquisition times to their reference times (`motion_compensated`); rejected when the aligned
+   correlation, the inlier fraction or the translation is implausible;
+b. refinement by phase correlation (`odometry.registration`) of the query and the match turned by
+   the sinogram rotation; rejected when its peak is weak or when it disagrees with the sinogram
+   estimate by more than `max_disagreement_m` / `_deg`;
+c. the covariance from the phase-correlation peak, inflated by the disagreement, floored
+   (`loop_covariance`).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from odometry.deskew import motion_from_twist
+from odometry.registration import PreparedScan, prepare, register
+from odometry.scan import RadarFrame, Scan
+from radar_slam.loops.config import LoopClosureConfig, LoopCovarianceConfig
+from radar_slam.loops.records import KeyScan, Verification
+from raplace.pose import PoseEstimator, RelativePose
+from raplace.se2 import between, compose, rotate_covariance, wrap_angle
+from raplace.units import NS_PER_S
+
+FloatArray = NDArray[np.float64]
+
+
+def loop_covariance(
+    peak_covariance: ArrayLike,
+    disagreement: ArrayLike,
+    yaw_rad: float,
+    cfg: LoopCovarianceConfig,
+) -> FloatArray:
+    """Covariance (3, 3) of a verified loop measurement in GTSAM's tangent space.
+
+    Args:
+        peak_covariance: (3, 3) covariance of the phase-correlation estimate, translation in the
+            query frame (`MotionEstimate.covariance`) [m^2, m rad, rad^2].
+        disagreement: (3,) sinogram estimate expressed relative to the refined one (dx, dy [m],
+            dyaw [rad]).
+        yaw_rad: the loop's rotation (the match frame is turned by it from the query frame);
+            GTSAM perturbs a between-factor on the right, i.e. in the match frame.
+        cfg: the covariance model (see `LoopCovarianceConfig`).
+    """
+    d = np.asarray(disagreement, dtype=np.float64)
+    d_xy = float(np.hypot(d[0], d[1]))
+    d_yaw = abs(float(wrap_angle(d[2])))
+    w = cfg.disagreement_weight
+    floor_yaw = np.deg2rad(cfg.min_sigma_yaw_deg)
+    cov = cfg.sigma_scale**2 * np.asarray(peak_covariance, dtype=np.float64)
+    cov = cov + np.diag([(w * d_xy) ** 2, (w * d_xy) ** 2, (w * d_yaw) ** 2])
+    cov = cov + np.diag([cfg.min_sigma_xy_m**2, cfg.min_sigma_xy_m**2, floor_yaw**2])
+    return rotate_covariance(cov, -yaw_rad)  # the query frame is turned by -yaw in the match's
+
+
+def turned(scan: Scan, turn_rad: float) -> RadarFrame:
+    """`scan` seen from a frame whose x axis is turned by -`turn_rad` from the scan's: a point at
+    azimuth a in the scan's frame lies at a + turn_rad in the new one (azimuths offset)."""
+    return RadarFrame(
+        timestamp_ns=int(scan.timestamp_ns),
+        polar=scan.polar,
+        azimuths_rad=np.asarray(scan.azimuths_rad, dtype=np.float64) + turn_rad,
+        range_resolution_m=float(scan.range_resolution_m),
+        sensor=scan.sensor,
+        azimuth_times_ns=scan.azimuth_times_ns,
+    )
+
+
+def turned_twist(twist: FloatArray | None, turn_rad: float) -> FloatArray | None:
+    """A body twist (vx, vy, yaw rate) expressed in a frame turned like `turned`."""
+    if twist is None:
+        return None
+    c, s = np.cos(turn_rad), np.sin(turn_rad)
+    vx, vy, w = (float(v) for v in twist)
+    return np.array([c * vx - s * vy, s * vx + c * vy, w])
+
+
+def mean_acquisition_offset_s(scan: Scan) -> float | None:
+    """Mean azimuth time minus the scan's reference time [s] (None without azimuth times)."""
+    times = scan.azimuth_times_ns
+    if times is None or len(times) == 0:
+        return None
+    return float(np.mean(np.asarray(times, dtype=np.float64) - float(scan.timestamp_ns))) / NS_PER_S
+
+
+def motion_compensated(estimate: FloatArray, query: KeyScan, match: KeyScan) -> FloatArray:
+    """A T_query_match estimated from images that are not de-skewed, moved to the scans'
+    reference times.
+
+    Without de-skewing, a scan's image is on average the scene seen from the pose at its mean
+    acquisition time. With P = the pose at that time in the reference-time frame (constant body
+    twist), the image estimate is P_q^-1 T_qm P_m, so T_qm = P_q * estimate * P_m^-1. For two
+    scans driving in opposite directions the correction is about speed x sweep (2.5 m at 10 m/s
+    over 250 ms); in the same direction at the same speed it cancels. Scans without twist or
+    azimuth times are left as they are.
+    """
+    poses = []
+    for scan in (query, match):
+        offset = mean_acquisition_offset_s(scan.scan)
+        if scan.twist is None or offset is None:
+            poses.append(np.zeros(3))
+        else:
+            poses.append(motion_from_twist(scan.twist, offset))
+    return compose(compose(poses[0], estimate), between(poses[1], np.zeros(3)))
+
+
+class Verifier(Protocol):
+    """Verifies a proposed loop between a query scan and a database (match) scan."""
+
+    def __call__(self, query: KeyScan, match: KeyScan) -> Verification: ...
+
+
+class GeometricVerifier:
+    """Sinogram relative pose, refined by phase correlation (see the module docstring).
+
+    Caches the current query's pose image and prepared scan, so verifying several candidates of
+    one query conditions the query scan once.
+    """
+
+    def __init__(self, cfg: LoopClosureConfig) -> None:
+        self.cfg = cfg
+        self.pose_estimator = PoseEstimator(cfg.raplace.pose)
+        self._query_key: int | None = None
+        self._query_image: NDArray[np.float32] | None = None
+        self._query_prepared: PreparedScan | None = None
+
+    def _query(self, query: KeyScan) -> NDArray[np.float32]:
+        if self._query_key != query.key or self._query_image is None:
+            s = query.scan
+            self._query_key = query.key
+            self._query_image = self.pose_estimator.image(
+                s.polar, s.azimuths_rad, s.range_resolution_m
+            )
+            self._query_prepared = None
+        return self._query_image
+
+    def _prepared_query(self, query: KeyScan) -> PreparedScan:
+        if self._query_prepared is None:
+            self._query_prepared = prepare(query.scan, self.cfg.refinement, query.twist)
+        return self._query_prepared
+
+    def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
+        """Verify T_query_match; never raises for a bad match (the reason says why)."""
+        vcfg = self.cfg.verification
+        query_image = self._query(query)
+        m = match.scan
+        map_image = self.pose_estimator.image(m.polar, m.azimuths_rad, m.range_resolution_m)
+        rel: RelativePose = self.pose_estimator.estimate(query_image, map_image)
+        sinogram = motion_compensated(rel.as_array(), query, match)
+        nan3 = np.full(3, np.nan)
+        nan33 = np.full((3, 3), np.nan)
+
+        def failed(
+            reason: str, measurement: FloatArray = sinogram, quality: float = 0.0
+        ) -> Verification:
+            return Verification(
+                False, reason, measurement, nan33, sinogram, float(rel.quality), quality
+            )
+
+        if not np.isfinite(rel.quality) or rel.quality < vcfg.min_sinogram_quality:
+            return failed(
+                f"weak sinogram alignment (correlation {rel.quality:.2f} < "
+                f"{vcfg.min_sinogram_quality:.2f})"
+            )
+        if rel.inlier_fraction < vcfg.min_inlier_fraction:
+            return failed(
+                f"sinogram shifts inconsistent (inliers {rel.inlier_fraction:.2f} < "
+                f"{vcfg.min_inlier_fraction:.2f})"
+            )
+        distance_m = float(np.hypot(sinogram[0], sinogram[1]))
+        if distance_m > vcfg.max_translation_m:
+            return failed(
+                f"scans {distance_m:.1f} m apart (more than {vcfg.max_translation_m:.1f} m)"
+            )
+
+        # Phase correlation of the query and the match turned by the sinogram rotation.
+        turn = float(sinogram[2])
+        aligned = prepare(
+            turned(match.scan, turn), self.cfg.refinement, turned_twist(match.twist, turn)
+        )
+        estimate = register(self._prepared_query(query), aligned, self.cfg.refinement)
+        refined = compose(estimate.motion, np.array([0.0, 0.0, turn]))
+        if not estimate.ok:
+            return failed(f"phase correlation failed: {estimate.reason}", nan3, estimate.quality)
+        if estimate.quality < vcfg.min_refined_quality:
+            return failed(
+                f"weak phase-correlation peak (quality {estimate.quality:.1f} < "
+                f"{vcfg.min_refined_quality:.1f})",
+                refined,
+                estimate.quality,
+            )
+        disagreement = between(refined, sinogram)
+        off_m = float(np.hypot(disagreement[0], disagreement[1]))
+        off_deg = float(np.rad2deg(abs(wrap_angle(disagreement[2]))))
+        if off_m > vcfg.max_disagreement_m or off_deg > vcfg.max_disagreement_deg:
+            return failed(
+                f"sinogram and phase correlation disagree by {off_m:.2f} m / {off_deg:.2f} deg "
+                f"(max {vcfg.max_disagreement_m:.2f} m / {vcfg.max_disagreement_deg:.2f} deg)",
+                refined,
+                estimate.quality,
+            )
+        covariance = loop_covariance(
+            estimate.covariance, disagreement, float(refined[2]), self.cfg.covariance
+        )
+        return Verification(
+            True, "", refined, covariance, sinogram, float(rel.quality), float(estimate.quality)
+        )

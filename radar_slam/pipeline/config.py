@@ -1,0 +1,76 @@
+"""Settings of a SLAM run: defaults in code, then the family's shipped YAML, then the user's."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from odometry import OdometryConfig
+from radar_slam.config import configs_dir, merge, read_yaml
+from radar_slam.datasets import DatasetConfig, open_sequence
+from radar_slam.datasets.frame import RadarSequence
+from radar_slam.errors import ConfigError
+from radar_slam.graph import GraphConfig
+from radar_slam.loops import (
+    LoopClosureConfig,
+)
+from radar_slam.maps.config import MapsConfig  # issue-13: maps section
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """All settings of a SLAM run, one section per stage (each stage gets only its own)."""
+
+    dataset: DatasetConfig = field(default_factory=DatasetConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
+    graph: GraphConfig = field(default_factory=GraphConfig)
+    maps: MapsConfig = field(default_factory=MapsConfig)  # issue-13: map building, localisation
+
+
+def family_config_path(family: str) -> Path:
+    """The shipped YAML overrides of a dataset family (may not exist)."""
+    return configs_dir() / f"{family}.yaml"
+
+
+def load_config(
+    family: str | None = None,
+    path: Path | None = None,
+    overrides: dict[str, Any] | None = None,
+) -> PipelineConfig:
+    """Defaults in code, then `configs/<family>.yaml` (when shipped), then the file `path`, then
+    `overrides` (a nested mapping). Unknown keys and wrong types are `ConfigError`s."""
+    config = PipelineConfig()
+    if family is not None:
+        shipped = family_config_path(family)
+        if shipped.is_file():
+            config = merge(PipelineConfig, config, read_yaml(shipped), str(shipped))
+    if path is not None:
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"{path}: config file not found")
+        config = merge(PipelineConfig, config, read_yaml(path), str(path))
+    if overrides:
+        config = merge(PipelineConfig, config, overrides, "overrides")
+    return config
+
+
+def open_configured(
+    spec: str, data_root: Path | None = None, path: Path | None = None
+) -> tuple[RadarSequence, PipelineConfig]:
+    """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`).
+
+    The family, known only once the sequence is found, selects the shipped overrides; when the
+    configuration's `dataset` section changes loader settings, the sequence is opened again
+    with them (opening is lazy). The ground truth and the first scan are then read, so that a
+    malformed file fails before any work rather than after it.
+    """
+    load_config(None, path)  # a mistake in the user's file fails before any data is generated
+    sequence = open_sequence(spec, data_root)
+    config = load_config(sequence.family, path)
+    if config.dataset.loader_options():
+        sequence = open_sequence(spec, data_root, config.dataset)
+    _ = sequence.ground_truth  # a malformed GT file fails now, not after the run (issue 12)
+    _ = sequence[0]  # ... and so does a first scan of the wrong shape or format
+    return sequence, config

@@ -1,0 +1,219 @@
+"""The SLAM runner: odometry -> pose graph <- verified loops.
+
+`Pipeline(sequence, config).run()` processes the scans in order and returns a `Results`:
+
+    for each scan:  read -> odometry -> extend graph -> detect loops -> close loops -> progress
+    at the end:     resolve pending loops -> final optimisation -> review loops -> evaluate
+
+Graph layout: one node per scan (key = scan index), so the SLAM trajectory has one pose per scan
+at the scan's timestamp, and a chain of odometry factors between consecutive scans with the
+odometry's motion and covariance (a constant-velocity gap keeps its large covariance). The chain
+reproduces the odometry poses exactly, so without loops SLAM equals odometry, and the graph.g2o
+written from it is read back with the same meaning (g2o edges between consecutive vertices are
+odometry). Loop factors join scans that entered the loop detector's database (every
+`query_spacing_m`).
+
+ISAM2 is updated whenever loops are added (so later loops are checked and initial guesses are
+made against the corrected estimate) and once at the end; a final batch pass (GNC by default)
+follows, and accepted loops whose final weight falls below `BACKEND_REJECT_WEIGHT` are recorded as
+rejected by the back end.
+
+Library code: no printing, no files (see `radar_slam.outputs` and `radar_slam.commands.run`).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from odometry import Odometry, OdometryResult
+from radar_slam.datasets.frame import RadarFrame, RadarSequence
+from radar_slam.evaluation.truth import is_true_loop
+from radar_slam.graph import LoopConstraint, PoseGraph
+from radar_slam.loops import (
+    LoopDetectorProtocol,
+    make_loop_detector,
+)
+from radar_slam.pipeline.config import PipelineConfig
+from radar_slam.pipeline.observer import PipelineObserver
+from radar_slam.pipeline.records import (
+    Progress,
+    ProgressCallback,
+    Results,
+)
+from radar_slam.pipeline.steps import (
+    StepTimer,
+    accuracy,
+    frame_count,
+    ground_truth_of,
+    odometry_factor,
+    review_loops,
+    sequence_label,
+    summarise,
+)
+from radar_slam.trajectory import Trajectory
+
+
+class Pipeline:
+    """Radar SLAM over one sequence.
+
+    Args:
+        sequence: the scans (and ground truth, if any).
+        config: settings (defaults when None); each stage gets its own section.
+        max_frames: process only the first scans.
+        progress: called after each scan with a `Progress` (e.g. to drive a progress bar).
+        loop_detector: a detector to use instead of the configured one (e.g. one with another
+            place recognizer or verifier); it must not have seen scans yet. Its keys are the scan
+            indices.
+        observer: watches the run scan by scan (e.g. the live viewer); see
+            `radar_slam.pipeline.observer.PipelineObserver`.
+    """
+
+    def __init__(
+        self,
+        sequence: RadarSequence,
+        config: PipelineConfig | None = None,
+        max_frames: int | None = None,
+        progress: ProgressCallback | None = None,
+        loop_detector: LoopDetectorProtocol | None = None,
+        observer: PipelineObserver | None = None,
+    ) -> None:
+        self.sequence = sequence
+        self.observer = observer
+        self.config = PipelineConfig() if config is None else config
+        self.frames = frame_count(sequence, max_frames)
+        self.progress = progress
+        self.odometry = Odometry(self.config.odometry)
+        self.loop_detector: LoopDetectorProtocol = (
+            make_loop_detector(self.config.loop_closure, scan_loader=self._reread)
+            if loop_detector is None
+            else loop_detector
+        )
+        self.graph = PoseGraph(self.config.graph)
+        self.timer = StepTimer()
+        self._results: list[OdometryResult] = []
+        self._loop_ids: dict[tuple[int, int], int] = {}  # (query, match) -> graph loop id
+        self._start = 0.0
+
+    def run(self) -> Results:
+        """Process every scan, optimise, evaluate; returns the results (call once)."""
+        self._start = time.perf_counter()
+        for index in range(self.frames):
+            frame = self._read(index)
+            result = self._track(frame)
+            self._extend_graph(result)
+            loops = self._detect_loops(frame, result)
+            self._close_loops(loops)
+            self._report(index + 1)
+            if self.observer is not None:
+                self.observer.on_scan(self, frame, result)
+        self._close_loops(self._resolve_pending())
+        self._optimise()
+        self._review_loops()
+        results = self._evaluate(time.perf_counter() - self._start)
+        if self.observer is not None:
+            self.observer.on_finish(results)
+        return results
+
+    # -- per-scan steps -----------------------------------------------------------------------
+    def _read(self, index: int) -> RadarFrame:
+        with self.timer("read"):
+            return self.sequence[index]
+
+    def _reread(self, index: int) -> RadarFrame:
+        """A database scan read again for loop verification (timed as loop detection)."""
+        return self.sequence[index]
+
+    def _track(self, frame: RadarFrame) -> OdometryResult:
+        with self.timer("odometry"):
+            result = self.odometry.register(frame)
+        self._results.append(result)
+        return result
+
+    def _extend_graph(self, result: OdometryResult) -> None:
+        with self.timer("graph"):
+            if result.index == 0:
+                self.graph.add_keyframe(0, result.pose)
+                return
+            measurement, covariance = odometry_factor(result)
+            previous = result.index - 1
+            self.graph.add_keyframe(result.index, self.graph.predict(previous, measurement))
+            self.graph.add_odometry(previous, result.index, measurement, covariance)
+
+    def _detect_loops(self, frame: RadarFrame, result: OdometryResult) -> list[LoopConstraint]:
+        with self.timer("loop detection"):
+            return self.loop_detector.add(frame, result.pose, result.index)
+
+    def _close_loops(self, loops: list[LoopConstraint]) -> None:
+        if not loops:
+            return
+        with self.timer("graph"):
+            for loop in loops:
+                loop_id = self.graph.add_loop(loop.i, loop.j, loop.measurement, loop.covariance)
+                self._loop_ids[(loop.i, loop.j)] = loop_id
+            self.graph.update()
+
+    def _report(self, done: int) -> None:
+        if self.progress is None:
+            return
+        accepted, rejected = self.loop_detector.tally()
+        elapsed = time.perf_counter() - self._start
+        self.progress(Progress(done, self.frames, accepted, rejected, elapsed))
+
+    # -- final steps --------------------------------------------------------------------------
+    def _resolve_pending(self) -> list[LoopConstraint]:
+        with self.timer("loop detection"):
+            return self.loop_detector.finish()
+
+    def _optimise(self) -> None:
+        with self.timer("optimisation"):
+            if self.frames > 1:
+                self.graph.update()
+                self.graph.optimize_final()
+
+    def _review_loops(self) -> None:
+        """Record the accepted loops the final pass discounted as rejected."""
+        review_loops(self.graph, self._loop_ids, self.loop_detector)
+
+    def _evaluate(self, seconds: float) -> Results:
+        with self.timer("evaluation"):
+            stamps = np.array([r.timestamp_ns for r in self._results], dtype=np.int64)
+            odometry = Trajectory(stamps, np.array([r.pose for r in self._results]))
+            slam = Trajectory(stamps, self.graph.estimates())
+            gt_poses, gt = ground_truth_of(self.sequence, self.frames)
+            loops = self.loop_detector.decisions
+            true_loops = [
+                None
+                if gt_poses is None
+                else is_true_loop(d.measurement, gt_poses[d.query_key], gt_poses[d.match_key])
+                for d in loops
+            ]
+            odometry_metrics = accuracy(odometry, gt)
+            slam_metrics = accuracy(slam, gt)
+        metrics = summarise(
+            frames=self.frames,
+            seconds=seconds,
+            gaps=sum(r.gap for r in self._results),
+            candidates=self.loop_detector.proposed,
+            loops=loops,
+            true_loops=true_loops,
+            odometry=odometry_metrics,
+            slam=slam_metrics,
+        )
+        return Results(
+            sequence=sequence_label(self.sequence),
+            config=self.config,
+            odometry=odometry,
+            slam=slam,
+            ground_truth=gt,
+            ground_truth_poses=gt_poses,
+            odometry_results=list(self._results),
+            loops=loops,
+            true_loops=true_loops,
+            graph=self.graph,
+            timings_s=dict(self.timer.seconds),
+            metrics=metrics,
+            odometry_metrics=odometry_metrics,
+            slam_metrics=slam_metrics,
+        )

@@ -1,0 +1,244 @@
+"""Driving made of legs of constant curvature: forward and reverse gear, stops, sharp turns.
+
+The smooth lattice drive of `route.py` turns along Gaussian-smoothed corners at 5-15 m/s and
+never stops. This module drives what that cannot: a path made of legs of piecewise-constant
+curvature (so the curvature, and with it the yaw rate, steps at a leg boundary), driven in forward
+or reverse gear (reverse: negative forward speed, the vehicle heading unchanged), with standing
+times, a speed profile limited by lateral acceleration and by longitudinal acceleration and
+braking (constant acceleration between path samples, exact in time), and its time
+parametrisation into the same `Trajectory` as route.py. `manoeuvres.py` turns a lattice route
+plus events (stops, roundabouts, U-turns, three-point turns, reversing) into legs.
+
+Poses are those of the vehicle base (x forward, y left) in the town frame.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from radar_slam.errors import RadarSlamError
+from radar_slam.sim.route import PATH_STEP_M, TIME_STEP_S, Trajectory
+
+FloatArray = NDArray[np.float64]
+
+MIN_LEG_M = 1e-6
+"""Legs shorter than this are dropped [m]."""
+
+
+@dataclass(frozen=True)
+class PlanDrivingConfig:
+    """How the ego vehicle drives a plan (see manoeuvres.py).
+
+    Attributes:
+        cruise_speed_mps: range of the cruise speed drawn per street [m/s] (urban: <= 14).
+        lateral_accel_mps2: lateral acceleration limit in turns [m/s^2].
+        accel_mps2: longitudinal acceleration limit [m/s^2].
+        decel_mps2: braking limit [m/s^2].
+        lane_offset_m: lane centre right of the street centre line [m].
+        right_turn_radius_m: radius of a 90-degree right turn at a junction (lane centre) [m].
+        left_turn_radius_m: radius of a 90-degree left turn at a junction [m].
+        lock_radius_m: tightest turning radius of the vehicle (full steering lock) [m].
+        lane_change_radius_m: radius of the two opposite arcs of a lateral shift [m].
+        manoeuvre_speed_mps: speed limit in U-turns and three-point turns [m/s].
+        reverse_speed_mps: speed limit in reverse gear [m/s].
+        gear_change_s: standing time when the gear changes [s].
+        stop_line_m: a stop before a straight-through junction is this far before its node [m].
+        curb_clearance_m: closest approach of the vehicle centre to a curb in manoeuvres [m].
+        ring_radius_m: radius of a roundabout's circulating lane (around the node) [m].
+        ring_entry_radius_m: radius of the right-hand entry and exit arcs of a roundabout [m].
+        ring_speed_mps: speed limit in a roundabout [m/s].
+    """
+
+    cruise_speed_mps: tuple[float, float] = (10.0, 14.0)
+    lateral_accel_mps2: float = 3.0
+    accel_mps2: float = 2.5
+    decel_mps2: float = 3.0
+    lane_offset_m: float = 1.75
+    right_turn_radius_m: float = 8.0
+    left_turn_radius_m: float = 12.0
+    lock_radius_m: float = 5.5
+    lane_change_radius_m: float = 25.0
+    manoeuvre_speed_mps: float = 3.0
+    reverse_speed_mps: float = 2.5
+    gear_change_s: float = 1.5
+    stop_line_m: float = 9.0
+    curb_clearance_m: float = 1.3
+    ring_radius_m: float = 12.0
+    ring_entry_radius_m: float = 8.0
+    ring_speed_mps: float = 6.0
+
+
+@dataclass(frozen=True)
+class Leg:
+    """A piece of path at constant steering curvature and gear.
+
+    Attributes:
+        length_m: distance travelled (positive in either gear) [m].
+        curvature: steering curvature in the vehicle frame (left positive) [1/m]; the heading
+            changes by gear * curvature per metre travelled.
+        gear: +1 forward, -1 reverse.
+        max_speed_mps: speed limit on the leg (magnitude) [m/s].
+        stop_s: standing time at the leg's end [s] (None: no stop unless the gear changes next).
+    """
+
+    length_m: float
+    curvature: float = 0.0
+    gear: int = 1
+    max_speed_mps: float = math.inf
+    stop_s: float | None = None
+
+
+def arc(angle_rad: float, radius_m: float, gear: int = 1, max_speed_mps: float = math.inf) -> Leg:
+    """A leg turning the heading by `angle_rad` (left positive) on a circle of `radius_m`."""
+    curvature = math.copysign(1.0 / radius_m, angle_rad) * gear
+    return Leg(abs(angle_rad) * radius_m, curvature, gear, max_speed_mps)
+
+
+def lane_shift(delta_left_m: float, radius_m: float, max_speed_mps: float = math.inf) -> list[Leg]:
+    """Two opposite arcs moving the vehicle sideways by `delta_left_m` (left positive) [m] and
+    leaving its heading unchanged; empty for a negligible shift."""
+    if abs(delta_left_m) < 1e-3:
+        return []
+    if abs(delta_left_m) > 2 * radius_m:
+        raise RadarSlamError(f"a lateral shift of {delta_left_m:.1f} m needs a larger radius")
+    angle = math.acos(1.0 - abs(delta_left_m) / (2 * radius_m))
+    sign = math.copysign(1.0, delta_left_m)
+    return [
+        arc(sign * angle, radius_m, max_speed_mps=max_speed_mps),
+        arc(-sign * angle, radius_m, max_speed_mps=max_speed_mps),
+    ]
+
+
+def along_leg(
+    start: tuple[float, float, float], leg: Leg, distance_m: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """x [m], y [m] and heading [rad] (each like `distance_m`) after travelling `distance_m`
+    along `leg` from `start` (x, y, heading): constant-curvature kinematics in closed form."""
+    x0, y0, h0 = start
+    u = np.asarray(distance_m, dtype=np.float64)
+    h = h0 + leg.gear * leg.curvature * u
+    if abs(leg.curvature) < 1e-12:
+        return x0 + leg.gear * u * math.cos(h0), y0 + leg.gear * u * math.sin(h0), h
+    x = x0 + (np.sin(h) - math.sin(h0)) / leg.curvature
+    y = y0 - (np.cos(h) - math.cos(h0)) / leg.curvature
+    return x, y, h
+
+
+@dataclass(frozen=True)
+class PathSamples:
+    """A path sampled every ~PATH_STEP_M of distance travelled.
+
+    Attributes:
+        s: (K,) distance travelled [m].
+        poses: (K, 3) base poses x [m], y [m], heading [rad, unwrapped].
+        gear: (K - 1,) gear of each interval between samples.
+        curvature: (K - 1,) heading change per metre travelled of each interval [1/m].
+        speed_limit: (K - 1,) speed limit of each interval [m/s].
+        stop: (K,) the vehicle stands (speed zero) at the sample.
+        dwell_s: (K,) standing time at each sample [s].
+    """
+
+    s: FloatArray
+    poses: FloatArray
+    gear: NDArray[np.int64]
+    curvature: FloatArray
+    speed_limit: FloatArray
+    stop: NDArray[np.bool_]
+    dwell_s: FloatArray
+
+
+def integrate_legs(
+    start: tuple[float, float, float], legs: list[Leg], step_m: float, gear_change_s: float
+) -> PathSamples:
+    """Sample the path of `legs` driven from `start` (x [m], y [m], heading [rad]) every
+    ~`step_m` [m].
+
+    Constant-curvature kinematics in closed form, so arcs and straights are exact and the
+    curvature steps at leg boundaries. The vehicle stops at the end of a leg with `stop_s` and
+    before every gear change (standing at least `gear_change_s` [s] there).
+    """
+    legs = [leg for leg in legs if leg.length_m > MIN_LEG_M]
+    if not legs:
+        raise RadarSlamError("a driving plan needs at least one leg")
+    xs, ys, hs, s_all = [start[0]], [start[1]], [start[2]], [0.0]
+    gear, curv, limit = [], [], []
+    dwell, stop = [0.0], [False]
+    for k, leg in enumerate(legs):
+        if leg.gear not in (1, -1):
+            raise RadarSlamError(f"leg gear must be +1 or -1, got {leg.gear}")
+        n = max(1, int(math.ceil(leg.length_m / step_m)))
+        u = np.linspace(0.0, leg.length_m, n + 1)[1:]
+        x, y, h = along_leg((xs[-1], ys[-1], hs[-1]), leg, u)
+        rate = leg.gear * leg.curvature  # heading change per metre travelled
+        xs.extend(x.tolist())
+        ys.extend(y.tolist())
+        hs.extend(h.tolist())
+        s_all.extend((s_all[-1] + u).tolist())
+        gear.extend([leg.gear] * n)
+        curv.extend([rate] * n)
+        limit.extend([leg.max_speed_mps] * n)
+        dwell.extend([0.0] * n)
+        stop.extend([False] * n)
+        changes_gear = k + 1 < len(legs) and legs[k + 1].gear != leg.gear
+        if leg.stop_s is not None or changes_gear:
+            stop[-1] = True
+            dwell[-1] = max(leg.stop_s or 0.0, gear_change_s if changes_gear else 0.0)
+    return PathSamples(
+        s=np.array(s_all),
+        poses=np.column_stack([xs, ys, hs]),
+        gear=np.array(gear, dtype=np.int64),
+        curvature=np.array(curv),
+        speed_limit=np.array(limit),
+        stop=np.array(stop, dtype=bool),
+        dwell_s=np.array(dwell),
+    )
+
+
+def speed_profile(path: PathSamples, cfg: PlanDrivingConfig) -> FloatArray:
+    """Speed magnitude (K,) at each sample [m/s]: interval limits (cruise, lateral
+    acceleration), zero at stops, then acceleration and braking limits in both directions."""
+    if not np.all(np.isfinite(path.speed_limit)):
+        raise RadarSlamError("every leg of a driving plan needs a finite speed limit")
+    turn = np.sqrt(cfg.lateral_accel_mps2 / np.maximum(np.abs(path.curvature), 1e-9))
+    interval = np.minimum(path.speed_limit, turn)
+    v = np.minimum(np.append(interval, np.inf), np.insert(interval, 0, np.inf))
+    v[path.stop] = 0.0
+    ds = np.diff(path.s)
+    for k in range(len(ds)):  # sequential by nature: each speed bounds the next
+        v[k + 1] = min(v[k + 1], math.sqrt(v[k] ** 2 + 2 * cfg.accel_mps2 * ds[k]))
+    for k in range(len(ds) - 1, -1, -1):
+        v[k] = min(v[k], math.sqrt(v[k + 1] ** 2 + 2 * cfg.decel_mps2 * ds[k]))
+    return v
+
+
+def time_parametrise(path: PathSamples, speed: FloatArray) -> Trajectory:
+    """Base poses every TIME_STEP_S along `path` driven at `speed` (K,) [m/s], standing
+    `path.dwell_s` at stops; constant acceleration between samples (exact distance in time)."""
+    ds = np.diff(path.s)
+    mean = 0.5 * (speed[1:] + speed[:-1])
+    if np.any(mean <= 0.0):
+        raise RadarSlamError("a driving plan stops twice within one path sample")
+    dt = ds / mean
+    accel = (speed[1:] ** 2 - speed[:-1] ** 2) / (2 * ds)
+    dwell = path.dwell_s
+    arrive = np.concatenate([[0.0], np.cumsum(dt + dwell[:-1])])
+    depart = arrive + dwell
+    t_grid = np.arange(0.0, depart[-1], TIME_STEP_S)
+    k = np.clip(np.searchsorted(depart, t_grid, side="right") - 1, 0, len(ds) - 1)
+    tau = np.clip(t_grid - depart[k], 0.0, dt[k])
+    s = path.s[k] + speed[k] * tau + 0.5 * accel[k] * tau**2
+    s = np.minimum(s, path.s[k + 1])
+    poses = np.stack([np.interp(s, path.s, path.poses[:, j]) for j in range(3)], axis=1)
+    return Trajectory(t_s=t_grid, poses=poses, length_m=float(path.s[-1]))
+
+
+def drive_legs(
+    start: tuple[float, float, float], legs: list[Leg], cfg: PlanDrivingConfig
+) -> Trajectory:
+    """The trajectory of `legs` driven from `start` (x [m], y [m], heading [rad])."""
+    path = integrate_legs(start, legs, PATH_STEP_M, cfg.gear_change_s)
+    return time_parametrise(path, speed_profile(path, cfg))

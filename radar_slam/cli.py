@@ -17,7 +17,7 @@ from radar_slam import __version__
 from radar_slam.errors import RadarSlamError
 from raplace import RaPlaceError
 
-COMMAND_MODULES = ("data", "evaluate", "simulate", "placerec", "run", "loops")
+COMMAND_MODULES = ("data", "evaluate", "simulate", "placerec", "run", "loops", "batch")
 
 app = typer.Typer(
     name="radar-slam",

@@ -10,6 +10,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from distributed import LocalCluster
 
 from radar_slam.batch import SUMMARY_COLUMNS, parse_grid, read_grid
 from radar_slam.cli import main
@@ -79,7 +80,7 @@ def damaged_copy(source: Path, destination: Path) -> Path:
     return destination
 
 
-def test_failed_run_is_a_row_and_grid_doubles_rows(
+def test_failed_run_is_a_row_and_grid_doubles_rows_on_a_scheduler(
     synthetic_root: Path, tiny: RadarSequence, tmp_path: Path
 ) -> None:
     damaged = damaged_copy(synthetic_root / "synthetic" / "tiny", tmp_path / "damaged")
@@ -87,7 +88,14 @@ def test_failed_run_is_a_row_and_grid_doubles_rows(
     grid.write_text("configs:\n  near: {}\n  far:\n    loop_closure: {query_spacing_m: 8.0}\n")
     out = tmp_path / "batch"
     args = ["batch", "synthetic/tiny", str(damaged), "--grid", str(grid), "--out", str(out)]
-    code = main([*args, "--data-root", str(synthetic_root), "--max-frames", "12"])
+    # An existing cluster, reached by its tcp:// address (as a cluster of machines would be).
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tcp://")
+        args += ["--data-root", str(synthetic_root), "--max-frames", "12"]
+        code = main([*args, "--scheduler", address])
     assert code == 1  # some runs failed: reported after the summary is written
     rows = read_rows(out)
     assert list(rows[0]) == list(SUMMARY_COLUMNS)

@@ -19,7 +19,7 @@ from radar_slam.errors import RadarSlamError
 from radar_slam.viewer import viewer_argv
 from raplace import RaPlaceError
 
-COMMAND_MODULES = ("data", "evaluate", "simulate", "placerec", "run", "loops", "export")
+COMMAND_MODULES = ("data", "evaluate", "simulate", "placerec", "run", "loops", "export", "batch")
 
 app = typer.Typer(
     name="radar-slam",

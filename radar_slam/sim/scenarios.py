@@ -33,12 +33,13 @@ from radar_slam.sim.route import DrivingConfig
 from radar_slam.sim.sensor import SensorConfig
 from radar_slam.sim.town import TownConfig
 from radar_slam.sim.world import ObjectConfig
+from raplace.units import NS_PER_S
 
 Waypoints = tuple[tuple[int, int], ...]
 
 EPOCH_NS = 1_567_000_000_000_000_000
 """Start of the default scenarios' clocks (late August 2019, like MulRan) [ns]."""
-DAY_NS = 86_400 * 1_000_000_000
+DAY_NS = 86_400 * NS_PER_S
 MULRAN_LIKE_ORIGIN = (353_000.0, 4_026_000.0)
 """Offset added to the town frame in global_pose.csv (UTM-like metres, as MulRan's KAIST)."""
 TINY_BINS = 1024

@@ -97,7 +97,7 @@ class OdometryResult:
 
 
 @dataclass
-class _Keyframe:
+class _ScanNode:
     """A scan: its pose at its reference time and the pose of its image frame (`image_pose`,
     world frame; see `PreparedScan`), which the registrations chain. A gap's (`gap`) poses are
     the constant-velocity prediction."""
@@ -114,9 +114,9 @@ class _Keyframe:
 
 @dataclass
 class _State:
-    keyframe: _Keyframe | None = None
-    previous: _Keyframe | None = None  # the previous scan (same fields as a keyframe)
-    last_registered: _Keyframe | None = None  # the last scan that was not a gap
+    keyframe: _ScanNode | None = None
+    previous: _ScanNode | None = None  # the previous scan (same fields as a keyframe)
+    last_registered: _ScanNode | None = None  # the last scan that was not a gap
     velocity: Velocity | None = None
     results: list[OdometryResult] = field(default_factory=list)
 
@@ -222,7 +222,7 @@ class Odometry:
         """The first scan: placed at `start_pose`, the first keyframe."""
         state = self._state
         start = self.start_pose.copy()
-        node = _Keyframe(index=index, pose=start, image_pose=start.copy(), scan=scan)
+        node = _ScanNode(index=index, pose=start, image_pose=start.copy(), scan=scan)
         state.keyframe = state.previous = state.last_registered = node
         return self._record(
             node,
@@ -236,7 +236,7 @@ class Odometry:
         )
 
     def _predicted_image_pose(
-        self, previous: _Keyframe, scan: PreparedScan, dt_s: float
+        self, previous: _ScanNode, scan: PreparedScan, dt_s: float
     ) -> FloatArray | None:
         """The image pose (world) the constant-velocity model expects for `scan` (None before
         any velocity is known)."""
@@ -248,7 +248,7 @@ class Odometry:
             previous.image_pose, motion_from_twist(twist, _image_interval_s(previous, scan, dt_s))
         )
 
-    def _references(self) -> list[_Keyframe]:
+    def _references(self) -> list[_ScanNode]:
         """Scans to register against, in order: the keyframe, the last registered scan, the
         previous scan (a gap's image is real, only its pose is predicted)."""
         state = self._state
@@ -257,7 +257,7 @@ class Odometry:
 
     def _search(
         self, index: int, scan: PreparedScan, predicted: FloatArray | None
-    ) -> tuple[_Keyframe | None, MotionEstimate]:
+    ) -> tuple[_ScanNode | None, MotionEstimate]:
         """The first reference `scan` registers against and the estimate (None and the last
         failed estimate when none does)."""
         estimate = None
@@ -275,7 +275,7 @@ class Odometry:
         return None, estimate
 
     def _registered(
-        self, reference: _Keyframe, scan: PreparedScan, predicted: FloatArray | None
+        self, reference: _ScanNode, scan: PreparedScan, predicted: FloatArray | None
     ) -> MotionEstimate:
         """Register `scan`'s image against `reference`'s: globally, and when that fails or
         disagrees with the prediction also seeded with the prediction; the stronger correlation
@@ -314,7 +314,7 @@ class Odometry:
         self,
         index: int,
         scan: PreparedScan,
-        reference: _Keyframe,
+        reference: _ScanNode,
         estimate: MotionEstimate,
         dt_s: float,
     ) -> OdometryResult:
@@ -334,7 +334,7 @@ class Odometry:
         image_pose = compose(reference.image_pose, estimate.motion)
         change = self._update_velocity(base, scan, image_pose, interval_s)
         pose = self._reference_pose(image_pose, scan)
-        node = _Keyframe(
+        node = _ScanNode(
             index=index,
             pose=pose,
             image_pose=image_pose,
@@ -369,8 +369,8 @@ class Odometry:
 
     def _redeskewed(
         self,
-        reference: _Keyframe,
-        base: _Keyframe,
+        reference: _ScanNode,
+        base: _ScanNode,
         scan: PreparedScan,
         estimate: MotionEstimate,
         interval_s: float,
@@ -393,7 +393,7 @@ class Odometry:
 
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(
-        self, reference: _Keyframe, scan: PreparedScan, image_motion: FloatArray
+        self, reference: _ScanNode, scan: PreparedScan, image_motion: FloatArray
     ) -> None:
         """Place the image frames of the scans registered before any velocity was known.
 
@@ -416,7 +416,7 @@ class Odometry:
         return bounded_twist(self._state.velocity.at(time_ns, self._trend_gain), self.config)
 
     def _update_velocity(
-        self, base: _Keyframe, scan: PreparedScan, image_pose: FloatArray, interval_s: float
+        self, base: _ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float
     ) -> FloatArray:
         """Measure the twist between `base`'s image pose and this scan's (`interval_s` apart);
         returns its change from the last measurement (zeros for the first)."""
@@ -457,7 +457,7 @@ class Odometry:
         twist = self._velocity_at(centre_ns)
         return compose(image_pose, inverse(motion_from_twist(twist, scan.image_time_s)))
 
-    def _needs_keyframe(self, estimate: MotionEstimate, keyframe: _Keyframe) -> bool:
+    def _needs_keyframe(self, estimate: MotionEstimate, keyframe: _ScanNode) -> bool:
         kcfg = self.config.keyframe
         return bool(
             np.hypot(estimate.dx, estimate.dy) >= kcfg.max_translation_m
@@ -498,7 +498,7 @@ class Odometry:
         motion = between(previous.pose, pose)
         sigma_yaw = np.deg2rad(qcfg.gap_sigma_yaw_deg)
         covariance = np.diag([qcfg.gap_sigma_xy_m**2, qcfg.gap_sigma_xy_m**2, sigma_yaw**2])
-        node = _Keyframe(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
+        node = _ScanNode(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
         state.previous = node  # the keyframe stays: the next scan tries it first
         keyframe = state.keyframe
         assert keyframe is not None
@@ -517,11 +517,11 @@ class Odometry:
 
     def _record(
         self,
-        node: _Keyframe,
+        node: _ScanNode,
         *,
         motion: FloatArray,
         covariance: FloatArray,
-        reference: _Keyframe,
+        reference: _ScanNode,
         reference_motion: FloatArray,
         is_keyframe: bool,
         ok: bool,
@@ -548,7 +548,7 @@ class Odometry:
         return result
 
 
-def _image_interval_s(previous: _Keyframe, scan: PreparedScan, dt_s: float) -> float:
+def _image_interval_s(previous: _ScanNode, scan: PreparedScan, dt_s: float) -> float:
     """Time [s] from `previous`'s image time to `scan`'s, `dt_s` apart in reference time."""
     return dt_s + scan.image_time_s - previous.scan.image_time_s
 
@@ -563,7 +563,7 @@ def _image_time_ns(scan: PreparedScan) -> int:
 
 
 def _factor_covariance(
-    registration_covariance: FloatArray, reference: _Keyframe, node: _Keyframe
+    registration_covariance: FloatArray, reference: _ScanNode, node: _ScanNode
 ) -> FloatArray:
     """Covariance (reference axes) of `node`'s pose in `reference`'s frame: the registration of
     the image frames (reference image axes) plus both conversions to reference times."""

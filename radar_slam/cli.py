@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "run",
     "loops",
     "export",
+    "batch",
     "maps",  # issue-13
 )
 

@@ -44,6 +44,7 @@ from radar_slam.evaluation.metrics import evaluate
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory
 from raplace.se2 import between, compose, wrap_angle
+from raplace.units import NS_PER_S
 from raplace.warp import polar_sample_coords, remap
 
 logger = logging.getLogger("bench_odometry")
@@ -112,7 +113,7 @@ def render_frame(
         azimuths_rad=azimuths,
         range_resolution_m=MULRAN_RANGE_RESOLUTION_M,
         sensor="bench-mulran",
-        azimuth_times_ns=(timestamp_ns + np.rint(tau * 1e9)).astype(np.int64),
+        azimuth_times_ns=(timestamp_ns + np.rint(tau * NS_PER_S)).astype(np.int64),
     )
 
 
@@ -318,7 +319,7 @@ def main() -> None:
     world = world_scan(args.scan)
     azimuths = mulran_azimuths()
     twist = np.array([args.speed, 0.0, np.deg2rad(args.yaw_rate)])
-    step = motion_from_twist(twist, FRAME_PERIOD_NS / 1e9)
+    step = motion_from_twist(twist, FRAME_PERIOD_NS / NS_PER_S)
     logger.info("rendering %d frames from %s ...", args.frames, args.scan.name)
     truth = [np.zeros(3)]
     for _ in range(args.frames - 1):

@@ -57,18 +57,22 @@ def load_config(
 
 
 def open_configured(
-    spec: str, data_root: Path | None = None, path: Path | None = None
+    spec: str,
+    data_root: Path | None = None,
+    path: Path | None = None,
+    overrides: dict[str, Any] | None = None,
 ) -> tuple[RadarSequence, PipelineConfig]:
-    """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`).
+    """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`,
+    then `overrides`, e.g. one configuration of a `radar-slam batch` grid).
 
     The family, known only once the sequence is found, selects the shipped overrides; when the
     configuration's `dataset` section changes loader settings, the sequence is opened again
     with them (opening is lazy). The ground truth and the first scan are then read, so that a
     malformed file fails before any work rather than after it.
     """
-    load_config(None, path)  # a mistake in the user's file fails before any data is generated
+    load_config(None, path, overrides)  # a mistake fails before any data is generated
     sequence = open_sequence(spec, data_root)
-    config = load_config(sequence.family, path)
+    config = load_config(sequence.family, path, overrides)
     if config.dataset.loader_options():
         sequence = open_sequence(spec, data_root, config.dataset)
     _ = sequence.ground_truth  # a malformed GT file fails now, not after the run (issue 12)

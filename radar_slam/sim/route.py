@@ -20,7 +20,7 @@ from scipy.ndimage import gaussian_filter1d
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
 from radar_slam.errors import RadarSlamError
 from radar_slam.sim.town import Town, offset_polyline, resample_polyline
-from raplace.se2 import compose
+from raplace.se2 import compose, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -76,7 +76,7 @@ class Trajectory:
         """(N, 3) base poses at times `t_s` (N,) [s], yaw wrapped to [-pi, pi)."""
         t = np.asarray(t_s, dtype=np.float64)
         out = np.stack([np.interp(t, self.t_s, self.poses[:, k]) for k in range(3)], axis=-1)
-        out[..., 2] = (out[..., 2] + np.pi) % (2 * np.pi) - np.pi
+        out[..., 2] = wrap_angle(out[..., 2])
         return out
 
     def radar_poses(self, t_s: FloatArray) -> FloatArray:

@@ -15,6 +15,7 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 | multisession_reverse_a | a loop around blocks: map session of a reverse pair | 395 | 1.0 km |
 | multisession_reverse_b | the same streets the other way, other lane, next day | 399 | 1.0 km |
 | tiny_reverse_a, _b | tiny's block one way, then the other way (session 1): CI | 90 | 165 m |
+| long_city | a city-length drive, revisits both ways: long-drive benchmark | 10000 | ~24 km |
 
 Driving scenarios (`DRIVING_SCENARIOS`, each also as `tiny_<name>` at 1024 bins for CI):
 turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear, and
@@ -35,12 +36,13 @@ from radar_slam.sim.route import DrivingConfig
 from radar_slam.sim.sensor import SensorConfig
 from radar_slam.sim.town import TownConfig
 from radar_slam.sim.world import ObjectConfig
+from raplace.units import NS_PER_S
 
 Waypoints = tuple[tuple[int, int], ...]
 
 EPOCH_NS = 1_567_000_000_000_000_000
 """Start of the default scenarios' clocks (late August 2019, like MulRan) [ns]."""
-DAY_NS = 86_400 * 1_000_000_000
+DAY_NS = 86_400 * NS_PER_S
 MULRAN_LIKE_ORIGIN = (353_000.0, 4_026_000.0)
 """Offset added to the town frame in global_pose.csv (UTM-like metres, as MulRan's KAIST)."""
 TINY_BINS = 1024
@@ -171,6 +173,48 @@ _LONG_ROUTE: Waypoints = (
     (2, 3),
 )
 
+_CITY_RING: Waypoints = ((1, 1), (11, 1), (11, 9), (1, 9), (1, 1))
+"""The outer ring of the `long_city` town (12 x 10 blocks), anticlockwise: 3.9 km."""
+_LONG_CITY_ROUTE: Waypoints = (
+    *_CITY_RING,
+    # A serpentine across the town along x, ending in the far corner.
+    (1, 3),
+    (11, 3),
+    (11, 5),
+    (1, 5),
+    (1, 7),
+    (11, 7),
+    (11, 9),
+    # The ring again, clockwise (every ring street revisited the other way).
+    (11, 1),
+    (1, 1),
+    (1, 9),
+    (11, 9),
+    # A serpentine along y, crossing the first one at every street.
+    (9, 9),
+    (9, 1),
+    (7, 1),
+    (7, 9),
+    (5, 9),
+    (5, 1),
+    (3, 1),
+    (3, 9),
+    (1, 9),
+    # The x serpentine back the other way, then the ring anticlockwise once more.
+    (1, 7),
+    (11, 7),
+    (11, 5),
+    (1, 5),
+    (1, 3),
+    (11, 3),
+    (11, 1),
+    *_CITY_RING,
+)
+"""About 26 km of streets through a 12 x 10 block town (the first 10,000 scans, ~24 km, are
+driven at 8-12 m/s): three laps of the ring (two directions) and two
+serpentines crossing each other and the ring, so most streets are revisited, some in reverse."""
+LONG_CITY_FRAMES = 10_000
+
 _BASE_SCENARIOS: tuple[Scenario, ...] = (
     Scenario(
         name="tiny",
@@ -237,6 +281,18 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         town_routes=(_LONG_ROUTE,),
         start_ns=EPOCH_NS + 6 * DAY_NS,
         town=TownConfig(n_blocks=(8, 7)),
+    ),
+    Scenario(
+        name="long_city",
+        description="~24 km, 10,000 scans through a 12 x 10 block town, revisits both ways: "
+        "the long-drive benchmark (scripts/bench_long.py)",
+        seed=13,
+        waypoints=_LONG_CITY_ROUTE,
+        town_routes=(_LONG_CITY_ROUTE,),
+        max_frames=LONG_CITY_FRAMES,
+        start_ns=EPOCH_NS + 30 * DAY_NS,
+        town=TownConfig(n_blocks=(12, 10)),
+        driving=DrivingConfig(cruise_speed_mps=(8.0, 12.0)),
     ),
 )
 

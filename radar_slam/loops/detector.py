@@ -188,15 +188,16 @@ class LoopDetector:
         """Mark an accepted loop as rejected afterwards (e.g. by the back end's GNC pass)."""
         self._record(decision, status="rejected", reason=reason)
 
+    def _append(self, new: LoopDecision) -> None:
+        """Record a new decision, keeping the tally."""
+        self._decisions.append(new)
+        self._tally[new.status] += 1
+
     def _record(self, decision: int, **changes: object) -> LoopDecision:
-        """Replace fields of decision `decision` (appended when new), keeping the tally."""
-        if decision == len(self._decisions):
-            new = LoopDecision(**changes)  # type: ignore[arg-type]
-            self._decisions.append(new)
-        else:
-            self._tally[self._decisions[decision].status] -= 1
-            new = dataclasses.replace(self._decisions[decision], **changes)  # type: ignore[arg-type]
-            self._decisions[decision] = new
+        """Replace fields of decision `decision`, keeping the tally."""
+        self._tally[self._decisions[decision].status] -= 1
+        new = dataclasses.replace(self._decisions[decision], **changes)  # type: ignore[arg-type]
+        self._decisions[decision] = new
         self._tally[new.status] += 1
         return new
 
@@ -277,24 +278,10 @@ class LoopDetector:
         passed = 0
         for candidate in candidates:  # at most `candidates` (k), best first
             match = self._entries[candidate.key]
-            result = self.verifier(
-                query, KeyScan(match.key, match.timestamp_ns, self._scan_of(match), match.twist)
-            )
+            match_scan = KeyScan(match.key, match.timestamp_ns, self._scan_of(match), match.twist)
+            result = self.verifier(query, match_scan)
             decision = len(self._decisions)
-            self._record(
-                decision,
-                query_key=key,
-                match_key=match.key,
-                query_ns=entry.timestamp_ns,
-                match_ns=match.timestamp_ns,
-                distance=candidate.distance,
-                measurement=np.asarray(result.measurement, dtype=np.float64),
-                covariance=np.asarray(result.covariance, dtype=np.float64),
-                sinogram_quality=result.sinogram_quality,
-                refined_quality=result.refined_quality,
-                status="rejected" if not result.ok else "pending",
-                reason=result.reason,
-            )
+            self._append(LoopDecision.of(query, match_scan, match.key, candidate.distance, result))
             log.debug(
                 "loop %d -> %d (distance %.3f): %s",
                 key,

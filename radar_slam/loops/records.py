@@ -91,6 +91,30 @@ class LoopDecision:
     status: LoopStatus
     reason: str
 
+    @classmethod
+    def of(
+        cls,
+        query: KeyScan,
+        match: KeyScan,
+        match_key: int,
+        distance: float,
+        result: Verification,
+    ) -> LoopDecision:
+        """The decision on a verified proposal: rejected if verification failed, else pending."""
+        return cls(
+            query_key=query.key,
+            match_key=match_key,
+            query_ns=int(query.timestamp_ns),
+            match_ns=int(match.timestamp_ns),
+            distance=distance,
+            measurement=np.asarray(result.measurement, dtype=np.float64),
+            covariance=np.asarray(result.covariance, dtype=np.float64),
+            sinogram_quality=result.sinogram_quality,
+            refined_quality=result.refined_quality,
+            status="pending" if result.ok else "rejected",
+            reason=result.reason,
+        )
+
     @property
     def accepted(self) -> bool:
         return self.status == "accepted"

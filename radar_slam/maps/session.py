@@ -159,21 +159,7 @@ class InterSessionDetector:
             match = self.keyframes.scan(kf)
             result = self.verifier(query, match)
             decision = len(self.decisions)
-            self.decisions.append(
-                LoopDecision(
-                    query_key=n,
-                    match_key=kf,
-                    query_ns=int(frame.timestamp_ns),
-                    match_ns=int(match.timestamp_ns),
-                    distance=candidate.distance,
-                    measurement=np.asarray(result.measurement, dtype=np.float64),
-                    covariance=np.asarray(result.covariance, dtype=np.float64),
-                    sinogram_quality=result.sinogram_quality,
-                    refined_quality=result.refined_quality,
-                    status="rejected" if not result.ok else "pending",
-                    reason=result.reason,
-                )
-            )
+            self.decisions.append(LoopDecision.of(query, match, kf, candidate.distance, result))
             if not result.ok:
                 continue
             verified = VerifiedLoop(

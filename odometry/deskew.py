@@ -14,6 +14,10 @@ rotation during the sweep to first order; errors stay below a centimetre beyond 
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -58,50 +62,192 @@ def sampling_maps(
 
     Returns:
         (bins, rows) float32 maps of shape (H, W) for `raplace.warp.remap`; rows in [0, n).
-    """
-    scale = np.float32(1.0 / azimuth_step_rad)
-    offset = np.float32(wrap_angle(first_azimuth_rad + rotation_rad))
-    rows_scan = _wrap_rows((bearing_rad - offset) * scale, n_azimuths)
-    if twist is None or timing is None or not np.any(np.asarray(twist) != 0.0):
-        return range_m * np.float32(1.0 / bin_size_m) - np.float32(0.5), rows_scan
 
-    vx, vy, yaw_rate = (float(v) for v in np.asarray(twist, dtype=np.float64))
-    c, s = np.cos(rotation_rad), np.sin(rotation_rad)
-    wx, wy = c * vx - s * vy, s * vx + c * vy  # velocity in the rendered (rotated) frame
-    tau = rows_scan * np.float32(timing[1])
-    tau += np.float32(timing[0])  # [s] per pixel
-    along = x_m * np.float32(wx)
-    along += y_m * np.float32(wy)  # r * (u . w)
-    across = x_m * np.float32(wy)
-    across -= y_m * np.float32(wx)  # r * (u x w)
+    The maps come from one fused, compiled pass over the pixels (numba; it releases the GIL),
+    bit-identical to the vectorised float32 formulas of `_sampling_maps_numpy`.
+    """
+    c = _MapConstants.of(
+        first_azimuth_rad, azimuth_step_rad, n_azimuths, bin_size_m, rotation_rad, twist, timing
+    )
+    shape = np.shape(x_m)
+    bins = np.empty(shape, dtype=np.float32)
+    rows = np.empty(shape, dtype=np.float32)
+    _maps_kernel(
+        _as_f32(x_m),
+        _as_f32(y_m),
+        _as_f32(range_m),
+        _as_f32(bearing_rad),
+        c.scale,
+        c.offset,
+        c.n,
+        c.inv_n,
+        c.inv_bin,
+        c.deskew,
+        c.t0,
+        c.t1,
+        c.wx,
+        c.wy,
+        c.w2,
+        c.yaw_rate,
+        bins,
+        rows,
+    )
+    return bins, rows
+
+
+def _as_f32(image: NDArray) -> FloatImage:
+    return np.ascontiguousarray(image, dtype=np.float32)
+
+
+@dataclass(frozen=True)
+class _MapConstants:
+    """The float32 scalars of `sampling_maps` (one home for the fused and numpy versions)."""
+
+    scale: np.float32
+    offset: np.float32
+    n: np.float32
+    inv_n: np.float32
+    inv_bin: np.float32
+    deskew: bool
+    t0: np.float32 = np.float32(0.0)
+    t1: np.float32 = np.float32(0.0)
+    wx: np.float32 = np.float32(0.0)
+    wy: np.float32 = np.float32(0.0)
+    w2: np.float32 = np.float32(0.0)
+    yaw_rate: np.float32 = np.float32(0.0)
+
+    @classmethod
+    def of(
+        cls,
+        first_azimuth_rad: float,
+        azimuth_step_rad: float,
+        n_azimuths: int,
+        bin_size_m: float,
+        rotation_rad: float,
+        twist: NDArray[np.float64] | None,
+        timing: tuple[float, float] | None,
+    ) -> _MapConstants:
+        base = cls(
+            scale=np.float32(1.0 / azimuth_step_rad),
+            offset=np.float32(wrap_angle(first_azimuth_rad + rotation_rad)),
+            n=np.float32(n_azimuths),
+            inv_n=np.float32(1.0 / n_azimuths),
+            inv_bin=np.float32(1.0 / bin_size_m),
+            deskew=False,
+        )
+        if twist is None or timing is None or not np.any(np.asarray(twist) != 0.0):
+            return base
+        vx, vy, yaw_rate = (float(v) for v in np.asarray(twist, dtype=np.float64))
+        c, s = np.cos(rotation_rad), np.sin(rotation_rad)
+        wx, wy = c * vx - s * vy, s * vx + c * vy  # velocity in the rendered (rotated) frame
+        return dataclasses.replace(
+            base,
+            deskew=True,
+            t0=np.float32(timing[0]),
+            t1=np.float32(timing[1]),
+            wx=np.float32(wx),
+            wy=np.float32(wy),
+            w2=np.float32(wx * wx + wy * wy),
+            yaw_rate=np.float32(yaw_rate),
+        )
+
+
+@numba.njit(nogil=True, cache=True)
+def _maps_kernel(
+    x_m, y_m, range_m, bearing_rad, scale, offset, n, inv_n, inv_bin, deskew,
+    t0, t1, wx, wy, w2, yaw_rate, bins, rows,
+):  # type: ignore[no-untyped-def]  # fmt: skip
+    """`_sampling_maps_numpy` pixel by pixel, the same float32 operations in the same order."""
+    half = np.float32(0.5)
+    two = np.float32(2.0)
+    zero = np.float32(0.0)
+    min_r2 = np.float32(MIN_RANGE_SQUARED_M2)
+    for i in range(x_m.shape[0]):
+        for j in range(x_m.shape[1]):
+            row = (bearing_rad[i, j] - offset) * scale
+            row = row - np.floor(row * inv_n) * n
+            r = range_m[i, j]
+            if not deskew:
+                bins[i, j] = r * inv_bin - half
+                rows[i, j] = row
+                continue
+            x = x_m[i, j]
+            y = y_m[i, j]
+            tau = row * t1 + t0
+            along = x * wx + y * wy
+            across = x * wy - y * wx
+            r2 = r * r
+            moved = (tau * w2 - two * along) * tau + r2
+            if not moved >= zero:
+                moved = zero
+            bins[i, j] = np.sqrt(moved) * inv_bin - half
+            denominator = r2 - along * tau
+            if not denominator >= min_r2:
+                denominator = min_r2
+            turn = ((across / denominator + yaw_rate) * tau) * scale
+            moved_row = row - turn
+            rows[i, j] = moved_row - np.floor(moved_row * inv_n) * n
+
+
+def _sampling_maps_numpy(
+    x_m: FloatImage,
+    y_m: FloatImage,
+    range_m: FloatImage,
+    bearing_rad: FloatImage,
+    *,
+    first_azimuth_rad: float,
+    azimuth_step_rad: float,
+    n_azimuths: int,
+    bin_size_m: float,
+    rotation_rad: float = 0.0,
+    twist: NDArray[np.float64] | None = None,
+    timing: tuple[float, float] | None = None,
+) -> tuple[FloatImage, FloatImage]:
+    """`sampling_maps` as vectorised numpy float32 operations: the reference the compiled kernel
+    is tested against (same arguments and result)."""
+    c = _MapConstants.of(
+        first_azimuth_rad, azimuth_step_rad, n_azimuths, bin_size_m, rotation_rad, twist, timing
+    )
+    rows_scan = np.subtract(bearing_rad, c.offset)
+    rows_scan *= c.scale
+    rows_scan = _wrap_rows(rows_scan, n_azimuths)
+    if not c.deskew:
+        return range_m * c.inv_bin - np.float32(0.5), rows_scan
+    tau = rows_scan * c.t1
+    tau += c.t0  # [s] per pixel
+    along = x_m * c.wx
+    along += y_m * c.wy  # r * (u . w)
+    across = x_m * c.wy
+    across -= y_m * c.wx  # r * (u x w)
     r2 = range_m * range_m
     # |q - tau w|^2 = r^2 - tau (2 (r u . w) - tau |w|^2)
-    moved = tau * np.float32(wx * wx + wy * wy)
+    moved = tau * c.w2
     moved -= np.float32(2.0) * along
     moved *= tau
     moved += r2
     np.maximum(moved, 0.0, out=moved)
     bins = np.sqrt(moved, out=moved)
-    bins *= np.float32(1.0 / bin_size_m)
+    bins *= c.inv_bin
     bins -= np.float32(0.5)
     # bearing of q - tau w ~ bearing - (u x tau w) / (r - u . tau w), then the turn during tau.
     along *= tau
     np.subtract(r2, along, out=along)
     np.maximum(along, np.float32(MIN_RANGE_SQUARED_M2), out=along)
     across /= along
-    across += np.float32(yaw_rate)
+    across += c.yaw_rate
     across *= tau
-    across *= scale
+    across *= c.scale
     rows = _wrap_rows(np.subtract(rows_scan, across, out=across), n_azimuths)
     return bins, rows
 
 
 def _wrap_rows(rows: FloatImage, n_azimuths: int) -> FloatImage:
-    """Rows modulo n_azimuths into [0, n) (floor-based: np.mod is slow on float32)."""
+    """Rows modulo n_azimuths into [0, n), in place (floor-based: np.mod is slow on float32)."""
     n = np.float32(n_azimuths)
-    wraps = np.floor(rows * np.float32(1.0 / n_azimuths))
+    wraps = rows * np.float32(1.0 / n_azimuths)
+    np.floor(wraps, out=wraps)
     wraps *= n
-    rows = rows - wraps
+    rows -= wraps
     # Rounding can leave -0.0 or exactly n; both are valid rows of the seam-wrapped image.
     return rows
 

@@ -27,13 +27,15 @@ from odometry.config import LevelConfig, PreprocessConfig
 from odometry.deskew import sampling_maps
 from odometry.scan import Scan
 from raplace.units import NS_PER_S
-from raplace.warp import CartesianGrid, remap
+from raplace.warp import CartesianGrid, remap, remap_wrapped, wrap_rows
 
 TWO_PI = 2.0 * np.pi
 UNIFORM_SWEEP_TOLERANCE = 0.05
 """Rows are resampled when an azimuth deviates from the fitted uniform sweep by more than this
 fraction of the azimuth step."""
 MIN_AZIMUTHS = 8
+MAX_UINT16_SUM_FACTOR = 257
+"""Up to this many uint8 bins add up exactly in a uint16."""
 
 FloatImage = NDArray[np.float32]
 
@@ -88,6 +90,12 @@ class PolarScan:
         if self.timing is None:
             return None
         return self.timing.first_row_s + 0.5 * (self.n_azimuths - 1) * self.timing.row_period_s
+
+    @functools.cached_property
+    def wrapped_image(self) -> FloatImage:
+        """(n_azimuths + 1, n_bins) `image` with row 0 repeated at the end (`raplace.warp`'s
+        seam layout), made once per scan for its many renders."""
+        return wrap_rows(self.image)
 
 
 @dataclass(frozen=True)
@@ -219,10 +227,7 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     n_bins = min(polar.shape[1], int(np.ceil(cfg.max_range_m / res))) // factor * factor
     if n_bins < factor:
         raise OdometryError(f"scan has {polar.shape[1]} bins: too few for max_range_m")
-    image: FloatImage = polar[:, :n_bins].astype(np.float32)
-    if factor > 1:  # block mean over `factor` bins
-        size = (n_bins // factor, image.shape[0])
-        image = np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), np.float32)
+    image = block_mean(polar[:, :n_bins], factor)
     if not np.array_equal(source_rows, np.arange(len(source_rows))):
         rows = np.broadcast_to(source_rows.astype(np.float32)[:, None], image.shape)
         cols = np.broadcast_to(np.arange(image.shape[1], dtype=np.float32), image.shape)
@@ -232,12 +237,13 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
 
     if cfg.ring_noise_removal:
         mid = image.shape[0] // 2
-        ring = np.partition(image, mid, axis=0)[mid]
-        image = image - ring[None, :]
+        image -= np.partition(image, mid, axis=0)[mid][None, :]
     if cfg.noise_floor_sigmas >= 0:
         body = image[:, near:]
-        floor = body.mean(axis=1) + cfg.noise_floor_sigmas * body.std(axis=1)
-        image = image - floor[:, None]
+        floor = body.mean(axis=1)
+        if cfg.noise_floor_sigmas > 0:
+            floor += cfg.noise_floor_sigmas * body.std(axis=1)
+        image -= floor[:, None]
     np.maximum(image, 0.0, out=image)
     image[:, :near] = 0.0
     if cfg.gamma != 1.0:
@@ -250,6 +256,25 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
         timestamp_ns=int(scan.timestamp_ns),
         timing=timing,
     )
+
+
+def block_mean(polar: NDArray, factor: int) -> FloatImage:
+    """(n_azimuths, n_bins // factor) float32 means of `factor` adjacent range bins.
+
+    Equal to OpenCV's INTER_AREA resize (a float32 sum times the float32 1 / factor); a uint8
+    scan is summed in uint16 first, which is exact and several times faster.
+    """
+    n_bins = polar.shape[1] // factor * factor
+    if factor == 1:
+        return np.array(polar[:, :n_bins], dtype=np.float32)
+    if polar.dtype == np.uint8 and factor <= MAX_UINT16_SUM_FACTOR:
+        sums = polar[:, 0:n_bins:factor].astype(np.uint16)
+        for k in range(1, factor):
+            sums += polar[:, k:n_bins:factor]
+        return np.multiply(sums, np.float32(1.0 / factor), dtype=np.float32)
+    size = (n_bins // factor, polar.shape[0])
+    image = polar[:, :n_bins].astype(np.float32)
+    return np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), np.float32)
 
 
 def sample_scan(
@@ -295,7 +320,7 @@ def sample_scan(
         if timing is None
         else (timing.first_row_s - time_offset_s, timing.row_period_s),
     )
-    return remap(polar.image, bins, rows)
+    return remap_wrapped(polar.wrapped_image, bins, rows)
 
 
 def render_cartesian(

@@ -51,9 +51,10 @@ from odometry.preprocess import (
 from odometry.rotation import (
     RotationEstimate,
     Signature,
+    angular_spectrum,
     estimate_rotation,
     polar_grid,
-    refine_rotation,
+    refine_rotation_against,
     signature,
 )
 from odometry.scan import Scan
@@ -136,9 +137,6 @@ class PreparedScan:
             if self.twist is not None
             else np.zeros(3)
         )
-        coarse = self._render(cartesian_level(cfg.coarse), 0.0)
-        self.coarse_spectrum: HalfSpectrum = forward(coarse)
-        self.rotation_signature: Signature = signature(self.coarse_spectrum, cfg.rotation)
 
     @property
     def timestamp_ns(self) -> int:
@@ -158,6 +156,18 @@ class PreparedScan:
         """The scan sampled at (x, y, range, bearing) points of its image frame."""
         return sample_scan(self.polar, *points, rotation_rad, self.twist, self.image_time_s)
 
+    # The spectra are made on first use: a scan re-rendered only to be registered again with a
+    # hint (or never used as a reference) needs none of them.
+    @functools.cached_property
+    def coarse_spectrum(self) -> HalfSpectrum:
+        """Half spectrum of the unrotated coarse image."""
+        return forward(self._render(cartesian_level(self.cfg.coarse), 0.0))
+
+    @functools.cached_property
+    def rotation_signature(self) -> Signature:
+        """Fourier-Mellin signature of the coarse image."""
+        return signature(self.coarse_spectrum, self.cfg.rotation)
+
     @functools.cached_property
     def fine_spectrum(self) -> HalfSpectrum:
         """Half spectrum of the unrotated fine image (made when the scan is a reference)."""
@@ -168,6 +178,11 @@ class PreparedScan:
         """The scan on the rotation-refinement polar grid (made when the scan is a reference)."""
         grid = polar_grid(self.cfg.rotation)
         return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
+
+    @functools.cached_property
+    def refine_spectrum(self) -> NDArray[np.complex64]:
+        """`angular_spectrum` of `refine_image` (made when the scan is a reference)."""
+        return angular_spectrum(self.refine_image)
 
 
 def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) -> PreparedScan:
@@ -210,7 +225,7 @@ def _residual_rotation(
     `ref`'s sensor."""
     grid = polar_grid(cfg.rotation)
     moved = cur._sample(grid.shifted(float(translation[0]), float(translation[1])), yaw)
-    return refine_rotation(ref.refine_image, moved, cfg.rotation)
+    return refine_rotation_against(ref.refine_spectrum, moved, cfg.rotation)
 
 
 def register(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> MotionEstimate:

@@ -147,6 +147,12 @@ def polar_grid(cfg: RotationConfig) -> PolarGrid:
     )
 
 
+def angular_spectrum(image: NDArray[np.float32]) -> NDArray[np.complex64]:
+    """(n_ranges, n_angles // 2 + 1) complex64 spectra along the angle axis of a scan sampled
+    on a `PolarGrid` ((n_angles, n_ranges) float32), one per range."""
+    return np.fft.rfft(image.T, axis=1).astype(np.complex64)
+
+
 def refine_rotation(
     ref: NDArray[np.float32], mov: NDArray[np.float32], cfg: RotationConfig
 ) -> RotationEstimate:
@@ -161,10 +167,16 @@ def refine_rotation(
     Returns:
         The residual rotation in [-pi, pi) [rad] to add to the estimate's yaw.
     """
-    n = ref.shape[0]
-    s_ref = np.fft.rfft(ref.T, axis=1).astype(np.complex64)
-    s_mov = np.fft.rfft(mov.T, axis=1).astype(np.complex64)
-    curve = correlate_1d(s_ref, s_mov, n, cfg.refine_smoothing_bins)
+    return refine_rotation_against(angular_spectrum(ref), mov, cfg)
+
+
+def refine_rotation_against(
+    ref_spectrum: NDArray[np.complex64], mov: NDArray[np.float32], cfg: RotationConfig
+) -> RotationEstimate:
+    """`refine_rotation` with the reference given by its `angular_spectrum` (kept by a
+    reference scan that many scans are registered against)."""
+    n = mov.shape[0]
+    curve = correlate_1d(ref_spectrum, angular_spectrum(mov), n, cfg.refine_smoothing_bins)
     peak = locate_peak_1d(curve, cfg.refine_smoothing_bins)
     step = 2.0 * np.pi / n
     # mov(bearing) = ref(bearing - d): the moved content sits d rows further CCW, i.e. the

@@ -91,8 +91,16 @@ def remap(
     polar: NDArray, bins: NDArray[np.float32], rows: NDArray[np.float32]
 ) -> NDArray[np.float32]:
     """Sample `polar` (n_azimuths, n_bins) bilinearly at fractional (bins, rows); 0 outside."""
+    return remap_wrapped(wrap_rows(polar), bins, rows)
+
+
+def remap_wrapped(
+    wrapped: NDArray[np.float32], bins: NDArray[np.float32], rows: NDArray[np.float32]
+) -> NDArray[np.float32]:
+    """`remap` of a polar array already made by `wrap_rows` (n_azimuths + 1, n_bins) float32:
+    for a scan sampled many times, wrap it once."""
     sampled = cv2.remap(
-        wrap_rows(polar),
+        wrapped,
         bins,
         rows,
         interpolation=cv2.INTER_LINEAR,

@@ -1,0 +1,121 @@
+"""The odometry's fast paths equal the straightforward computations they replace, bit for bit.
+
+The compiled sampling-map kernel against its vectorised numpy reference, the uint16 block mean
+against OpenCV's area resize, the per-scan caches (wrapped polar image, refinement spectrum)
+against fresh computations.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from test_odometry_units import FakeScan, clockwise_azimuths
+
+from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
+from odometry.deskew import _sampling_maps_numpy, sampling_maps
+from odometry.phase_correlation import forward
+from odometry.preprocess import block_mean, cartesian_level, preprocess_polar, render_cartesian
+from odometry.registration import PreparedScan, _residual_rotation
+from odometry.rotation import angular_spectrum, polar_grid, refine_rotation
+from raplace.warp import remap, remap_wrapped, wrap_rows
+
+N_AZ = 400
+SWEEP_S = 0.25
+
+
+def _random_map_arguments(rng: np.random.Generator, deskew: bool) -> dict:
+    return {
+        "first_azimuth_rad": float(rng.uniform(-4.0, 4.0)),
+        "azimuth_step_rad": float(rng.choice([-1.0, 1.0]) * 2.0 * np.pi / N_AZ),
+        "n_azimuths": N_AZ,
+        "bin_size_m": float(rng.uniform(0.05, 0.3)),
+        "rotation_rad": float(rng.uniform(-3.5, 3.5)),
+        "twist": rng.normal(0.0, [10.0, 1.0, 0.5]) if deskew else None,
+        "timing": (float(rng.uniform(-SWEEP_S, 0.0)), SWEEP_S / N_AZ),
+    }
+
+
+@pytest.mark.parametrize("deskew", [False, True])
+def test_sampling_map_kernel_equals_numpy_reference(deskew: bool) -> None:
+    rng = np.random.default_rng(11)
+    level = cartesian_level(LevelConfig(cell_m=0.5, size_px=96))
+    grid = polar_grid(OdometryConfig().rotation)
+    point_sets = [
+        (level.x_m, level.y_m, level.range_m, level.bearing_rad),
+        grid.shifted(3.2, -1.1),  # the refinement grid seen from a moved sensor
+    ]
+    for points in point_sets:
+        for _ in range(6):
+            kwargs = _random_map_arguments(rng, deskew)
+            bins, rows = sampling_maps(*points, **kwargs)
+            ref_bins, ref_rows = _sampling_maps_numpy(*points, **kwargs)
+            assert bins.dtype == rows.dtype == np.float32
+            np.testing.assert_array_equal(bins, ref_bins)
+            np.testing.assert_array_equal(rows, ref_rows)
+            assert rows.min() >= 0.0 and rows.max() <= N_AZ
+            if deskew:  # the de-skew really moved the samples
+                plain_bins, _ = _sampling_maps_numpy(*points, **{**kwargs, "twist": None})
+                assert np.abs(bins - plain_bins).max() > 0.1
+
+
+@pytest.mark.parametrize("factor", [1, 2, 3, 4, 5])
+def test_uint16_block_mean_equals_area_resize(factor: int) -> None:
+    rng = np.random.default_rng(factor)
+    polar = rng.integers(0, 256, (64, 203), dtype=np.uint8)
+    polar[:, :7] = 255  # saturated sums
+    n_bins = polar.shape[1] // factor * factor
+    expected = cv2.resize(
+        polar[:, :n_bins].astype(np.float32),
+        (n_bins // factor, polar.shape[0]),
+        interpolation=cv2.INTER_AREA,
+    )
+    mean = block_mean(polar, factor)
+    assert mean.dtype == np.float32
+    np.testing.assert_array_equal(mean, expected)
+    np.testing.assert_array_equal(block_mean(polar.astype(np.float32), factor), expected)
+
+
+def _blob_scan(seed: int, timestamp_ns: int = 0) -> FakeScan:
+    rng = np.random.default_rng(seed)
+    polar = rng.integers(0, 30, (N_AZ, 900), dtype=np.uint8)
+    rows = rng.integers(0, N_AZ, 300)
+    cols = rng.integers(60, 900, 300)
+    polar[rows, cols] = rng.integers(120, 255, 300, dtype=np.uint8)
+    times = timestamp_ns + ((np.arange(N_AZ) - N_AZ / 2) * (SWEEP_S / N_AZ * 1e9)).astype(np.int64)
+    return FakeScan(
+        timestamp_ns=timestamp_ns,
+        polar=cv2.GaussianBlur(polar, (5, 3), 0),
+        azimuths_rad=clockwise_azimuths(N_AZ),
+        range_resolution_m=0.1,
+        azimuth_times_ns=times,
+    )
+
+
+def test_wrapped_polar_cache_equals_fresh_wrap_and_remap() -> None:
+    polar = preprocess_polar(_blob_scan(1), PreprocessConfig(bin_size_m=0.2, max_range_m=80.0))
+    np.testing.assert_array_equal(polar.wrapped_image, wrap_rows(polar.image))
+    assert polar.wrapped_image is polar.wrapped_image  # made once
+    rng = np.random.default_rng(2)
+    bins = rng.uniform(-2.0, polar.image.shape[1] + 2.0, (50, 60)).astype(np.float32)
+    rows = rng.uniform(0.0, N_AZ, (50, 60)).astype(np.float32)
+    np.testing.assert_array_equal(
+        remap_wrapped(polar.wrapped_image, bins, rows), remap(polar.image, bins, rows)
+    )
+
+
+def test_prepared_scan_caches_equal_fresh_computations() -> None:
+    cfg = OdometryConfig()
+    polar = preprocess_polar(_blob_scan(3), cfg.preprocess)
+    twist = np.array([7.0, 0.3, 0.2])
+    scan = PreparedScan(polar, twist, cfg)
+    coarse = render_cartesian(polar, cartesian_level(cfg.coarse), 0.0, twist, scan.image_time_s)
+    np.testing.assert_array_equal(scan.coarse_spectrum, forward(coarse))
+    grid = polar_grid(cfg.rotation)
+    np.testing.assert_array_equal(scan.refine_spectrum, angular_spectrum(scan.refine_image))
+    # The cached reference spectrum gives the same residual rotation as the images.
+    moving = PreparedScan(preprocess_polar(_blob_scan(3, 250_000_000), cfg.preprocess), twist, cfg)
+    cached = _residual_rotation(scan, moving, np.array([1.5, 0.2]), 0.05, cfg)
+    points = grid.shifted(1.5, 0.2)
+    fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), cfg.rotation)
+    assert cached == fresh

@@ -19,6 +19,7 @@ import functools
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -227,8 +228,10 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     n_bins = min(polar.shape[1], int(np.ceil(cfg.max_range_m / res))) // factor * factor
     if n_bins < factor:
         raise OdometryError(f"scan has {polar.shape[1]} bins: too few for max_range_m")
-    image = block_mean(polar[:, :n_bins], factor)
+    sums = block_sums(polar[:, :n_bins], factor)
+    image = block_mean(polar[:, :n_bins], factor) if sums is None else _mean_of_sums(sums, factor)
     if not np.array_equal(source_rows, np.arange(len(source_rows))):
+        sums = None  # the rows are resampled below
         rows = np.broadcast_to(source_rows.astype(np.float32)[:, None], image.shape)
         cols = np.broadcast_to(np.arange(image.shape[1], dtype=np.float32), image.shape)
         image = remap(image, np.ascontiguousarray(cols), np.ascontiguousarray(rows))
@@ -236,8 +239,7 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     near = min(image.shape[1], int(np.ceil(cfg.min_range_m / bin_size)))
 
     if cfg.ring_noise_removal:
-        mid = image.shape[0] // 2
-        image -= np.partition(image, mid, axis=0)[mid][None, :]
+        image -= _ring_level(image, sums, factor)[None, :]
     if cfg.noise_floor_sigmas >= 0:
         body = image[:, near:]
         floor = body.mean(axis=1)
@@ -262,19 +264,79 @@ def block_mean(polar: NDArray, factor: int) -> FloatImage:
     """(n_azimuths, n_bins // factor) float32 means of `factor` adjacent range bins.
 
     Equal to OpenCV's INTER_AREA resize (a float32 sum times the float32 1 / factor); a uint8
-    scan is summed in uint16 first, which is exact and several times faster.
+    scan is summed in uint16 first (`block_sums`), which is exact and several times faster.
     """
+    sums = block_sums(polar, factor)
+    if sums is not None:
+        return _mean_of_sums(sums, factor)
     n_bins = polar.shape[1] // factor * factor
+    image = np.array(polar[:, :n_bins], dtype=np.float32)
     if factor == 1:
-        return np.array(polar[:, :n_bins], dtype=np.float32)
-    if polar.dtype == np.uint8 and factor <= MAX_UINT16_SUM_FACTOR:
-        sums = polar[:, 0:n_bins:factor].astype(np.uint16)
-        for k in range(1, factor):
-            sums += polar[:, k:n_bins:factor]
-        return np.multiply(sums, np.float32(1.0 / factor), dtype=np.float32)
+        return image
     size = (n_bins // factor, polar.shape[0])
-    image = polar[:, :n_bins].astype(np.float32)
     return np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), np.float32)
+
+
+def block_sums(polar: NDArray, factor: int) -> NDArray[np.uint16] | None:
+    """(n_azimuths, n_bins // factor) exact uint16 sums of `factor` adjacent bins of a uint8
+    scan (None for any other dtype, or more bins than a uint16 can sum)."""
+    if polar.dtype != np.uint8 or factor > MAX_UINT16_SUM_FACTOR:
+        return None
+    n_bins = polar.shape[1] // factor * factor
+    sums = polar[:, 0:n_bins:factor].astype(np.uint16)
+    for k in range(1, factor):
+        sums += polar[:, k:n_bins:factor]
+    return sums
+
+
+def _mean_of_sums(sums: NDArray[np.uint16], factor: int) -> FloatImage:
+    """`block_mean` from `block_sums`: a monotonic map, so it commutes with order statistics."""
+    return np.multiply(sums, np.float32(1.0 / factor), dtype=np.float32)
+
+
+def _ring_level(image: FloatImage, sums: NDArray[np.uint16] | None, factor: int) -> FloatImage:
+    """(n_bins,) median over azimuths of every range bin of `image` (ring noise).
+
+    With the bins' uint16 sums (`image` is `_mean_of_sums(sums)`), the exact median comes from
+    per-bin counts of the sums instead of a partition of the floats.
+    """
+    mid = image.shape[0] // 2
+    if sums is None:
+        return np.partition(image, mid, axis=0)[mid]
+    levels = int(np.iinfo(np.uint8).max) * factor + 1
+    return _mean_of_sums(column_order_statistic(sums, mid, levels), factor)
+
+
+@numba.njit(nogil=True, cache=True)
+def _column_order_statistic(values, rank, levels):  # type: ignore[no-untyped-def]  # fmt: skip
+    n_rows, n_cols = values.shape
+    out = np.empty(n_cols, dtype=np.uint16)
+    counts = np.zeros(levels, dtype=np.int32)
+    for j in range(n_cols):
+        counts[:] = 0
+        for i in range(n_rows):
+            counts[values[i, j]] += 1
+        seen = 0
+        for v in range(levels):
+            seen += counts[v]
+            if seen > rank:
+                out[j] = v
+                break
+    return out
+
+
+def column_order_statistic(
+    values: NDArray[np.uint16], rank: int, levels: int
+) -> NDArray[np.uint16]:
+    """(n_cols,) the `rank`-th smallest (0-based) value of each column of `values`
+    (n_rows, n_cols) uint16 < `levels`, i.e. `np.partition(values, rank, axis=0)[rank]`, by
+    counting (linear time, compiled, releases the GIL)."""
+    if not 0 <= rank < values.shape[0]:
+        raise ValueError(f"rank {rank} outside 0..{values.shape[0] - 1}")
+    if values.size and int(values.max()) >= levels:
+        raise ValueError(f"values must be below {levels}")
+    result: NDArray[np.uint16] = _column_order_statistic(values, int(rank), int(levels))
+    return result
 
 
 def sample_scan(

@@ -15,7 +15,15 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
 from odometry.deskew import _sampling_maps_numpy, sampling_maps
 from odometry.phase_correlation import forward
-from odometry.preprocess import block_mean, cartesian_level, preprocess_polar, render_cartesian
+from odometry.preprocess import (
+    _ring_level,
+    block_mean,
+    block_sums,
+    cartesian_level,
+    column_order_statistic,
+    preprocess_polar,
+    render_cartesian,
+)
 from odometry.registration import PreparedScan, _residual_rotation
 from odometry.rotation import angular_spectrum, polar_grid, refine_rotation
 from raplace.warp import remap, remap_wrapped, wrap_rows
@@ -119,3 +127,26 @@ def test_prepared_scan_caches_equal_fresh_computations() -> None:
     points = grid.shifted(1.5, 0.2)
     fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), cfg.rotation)
     assert cached == fresh
+
+
+@pytest.mark.parametrize("rank", [0, 1, 100, 200, 399])
+def test_counting_order_statistic_equals_partition(rank: int) -> None:
+    rng = np.random.default_rng(rank)
+    values = rng.integers(0, 766, (400, 120)).astype(np.uint16)
+    values[:, :40] = rng.integers(0, 4, (400, 40))  # many ties, as in radar noise
+    values[:, 40] = 765
+    expected = np.partition(values, rank, axis=0)[rank]
+    np.testing.assert_array_equal(column_order_statistic(values, rank, 766), expected)
+
+
+def test_ring_median_from_counts_equals_float_partition() -> None:
+    rng = np.random.default_rng(5)
+    polar = rng.integers(0, 256, (N_AZ, 600), dtype=np.uint8)
+    polar[:, 100:200] = rng.integers(0, 3, (N_AZ, 100))
+    for factor in (1, 3):
+        sums = block_sums(polar, factor)
+        assert sums is not None
+        image = block_mean(polar, factor)
+        expected = np.partition(image, N_AZ // 2, axis=0)[N_AZ // 2]
+        np.testing.assert_array_equal(_ring_level(image, sums, factor), expected)
+        np.testing.assert_array_equal(_ring_level(image, None, factor), expected)

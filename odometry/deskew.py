@@ -194,23 +194,13 @@ def _sampling_maps_numpy(
     y_m: FloatImage,
     range_m: FloatImage,
     bearing_rad: FloatImage,
-    *,
-    first_azimuth_rad: float,
-    azimuth_step_rad: float,
-    n_azimuths: int,
-    bin_size_m: float,
-    rotation_rad: float = 0.0,
-    twist: NDArray[np.float64] | None = None,
-    timing: tuple[float, float] | None = None,
+    c: _MapConstants,
 ) -> tuple[FloatImage, FloatImage]:
-    """`sampling_maps` as vectorised numpy float32 operations: the reference the compiled kernel
-    is tested against (same arguments and result)."""
-    c = _MapConstants.of(
-        first_azimuth_rad, azimuth_step_rad, n_azimuths, bin_size_m, rotation_rad, twist, timing
-    )
+    """`sampling_maps` (constants from `_MapConstants.of`) as vectorised numpy float32
+    operations: the reference the compiled kernel is tested against."""
     rows_scan = np.subtract(bearing_rad, c.offset)
     rows_scan *= c.scale
-    rows_scan = _wrap_rows(rows_scan, n_azimuths)
+    rows_scan = _wrap_rows(rows_scan, c)
     if not c.deskew:
         return range_m * c.inv_bin - np.float32(0.5), rows_scan
     tau = rows_scan * c.t1
@@ -237,16 +227,15 @@ def _sampling_maps_numpy(
     across += c.yaw_rate
     across *= tau
     across *= c.scale
-    rows = _wrap_rows(np.subtract(rows_scan, across, out=across), n_azimuths)
+    rows = _wrap_rows(np.subtract(rows_scan, across, out=across), c)
     return bins, rows
 
 
-def _wrap_rows(rows: FloatImage, n_azimuths: int) -> FloatImage:
+def _wrap_rows(rows: FloatImage, c: _MapConstants) -> FloatImage:
     """Rows modulo n_azimuths into [0, n), in place (floor-based: np.mod is slow on float32)."""
-    n = np.float32(n_azimuths)
-    wraps = rows * np.float32(1.0 / n_azimuths)
+    wraps = rows * c.inv_n
     np.floor(wraps, out=wraps)
-    wraps *= n
+    wraps *= c.n
     rows -= wraps
     # Rounding can leave -0.0 or exactly n; both are valid rows of the seam-wrapped image.
     return rows

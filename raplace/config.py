@@ -142,8 +142,8 @@ class RetrievalConfig:
             their neighbours at full resolution; False scores all at full resolution.
         coarse_shortlist: entries kept by the invariant bound for the low-resolution scoring
             (0: score every allowed entry at low resolution).
-        coarse_index_harmonics: lowest theta harmonics of the low-resolution descriptor in the
-            invariant vectors (the rest is bounded by its norm).
+        coarse_index_harmonics: lowest theta harmonics of the low-resolution descriptor kept in
+            the invariant bound (raplace.index; the rest is bounded by its norm).
         coarse_theta_pool: descriptor rows averaged into one low-resolution row.
         coarse_n_freq: lowest frequency columns kept in the low-resolution descriptor.
         coarse_candidates: best entries by low-resolution distance that are re-scored.
@@ -159,7 +159,7 @@ class RetrievalConfig:
     coarse_n_freq: int = 8
     coarse_candidates: int = 25
     coarse_shortlist: int = 400
-    coarse_index_harmonics: int = 16
+    coarse_index_harmonics: int = 8
     neighbour_radius: int = 2
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
     loop_threshold: float = 0.2

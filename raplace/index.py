@@ -1,24 +1,29 @@
-"""Rotation-invariant index of RaPlace descriptors: the first stage of a place query.
+"""Rotation-invariant bound of the RaPlace rotation search: the first stage of a place query.
 
 A descriptor D(theta, k) (n_theta rows over theta in [0, pi), z-normalised) of a scan rotated
-by a is D shifted circularly along theta by a (modulo pi, the descriptor's period). The
-magnitudes |D^_w(k)| of its DFT along theta do not change under such a shift, so they describe
-the place independently of the heading. They also bound the rotation search of
-raplace.scoring: with n = n_theta, N = n_theta * n_freq and c_w the multiplicity of rfft bin w
-in the full DFT (1 for w = 0 and w = n / 2, else 2),
+by a is D shifted circularly along theta by a (modulo pi, the descriptor's period). Its DFT
+along theta, D^_w(k), only changes phase, by -2 pi w a / pi for every k. Hence, for a query Q and
+an entry M, the per-harmonic products X_w = sum_k Q^_w(k) conj(M^_w(k)) have rotation-invariant
+magnitudes, and they bound the rotation search of raplace.scoring: with n = n_theta,
+N = n_theta * n_freq and c_w the multiplicity of rfft bin w in the full DFT (1 for w = 0 and
+w = n / 2, else 2),
 
-    C_qm(s) / N = (1 / (n N)) sum_w sum_k Q^_w(k) conj(M^_w(k)) e^(2 pi i w s / n)
-               <= sum_w sum_k u_q(w, k) u_m(w, k),     u(w, k) = sqrt(c_w / (n N)) |D^_w(k)|,
+    C_qm(s) / N = sum_w c_w Re(X_w e^(2 pi i w s / n)) / (n N) <= sum_w c_w |X_w| / (n N)
 
-for every shift s (triangle inequality), and |u| = 1 for a z-normalised descriptor (Parseval).
-So 1 - u_q . u_m is a lower bound of the mutable-threshold distance, exact for an unrotated
-copy. Only the lowest `harmonics` theta harmonics are stored; the rest is bounded by
-Cauchy-Schwarz with the norms of the dropped parts (`residual`), so the bound stays valid:
+for every shift s (triangle inequality; the shift is common to all k, so the phases along k
+stay aligned). Only the lowest `harmonics` w are kept; the rest is bounded by Cauchy-Schwarz
+with the norms of the dropped parts (`residual`), so the bound stays valid:
 
-    u_q . u_m <= u_q[kept] . u_m[kept] + residual_q * residual_m.
+    sum_(w >= H) c_w |X_w| / (n N) <= residual_q * residual_m,
+    residual^2 = sum_(w >= H) sum_k c_w |D^_w(k)|^2 / (n N)   (1 in all for a z-normalised D).
 
-The vectors of all entries are one contiguous float32 matrix: ranking the database is one
-matrix-vector product, and only the best-bounded entries are scored with the rotation search.
+So 1 - bound is a lower bound of the mutable-threshold distance, exact for an unrotated copy
+with every harmonic kept. The magnitudes |D^_w(k)| alone (`invariant_vectors`) are the
+rotation-invariant global vector of a descriptor, but their dot product, which also bounds the
+correlation, is a much looser bound than the one above (it drops the phases along k). The kept
+harmonics of all entries are stored as one contiguous complex64 array per harmonic: ranking the
+database is `harmonics` matrix-vector products, and only the best-bounded entries are scored
+with the rotation search.
 """
 
 from __future__ import annotations
@@ -39,10 +44,10 @@ def harmonic_weights(n_theta: int, n_harmonics: int) -> NDArray[np.float64]:
     return weights
 
 
-def invariant_vectors(
+def scaled_harmonics(
     spectra: NDArray[np.complex64], n_theta: int, harmonics: int
-) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Rotation-invariant vectors of descriptors from their theta-spectra.
+) -> tuple[NDArray[np.complex64], NDArray[np.float32]]:
+    """The lowest theta harmonics of descriptors, scaled for the bound, and the dropped norm.
 
     Args:
         spectra: (..., n_theta // 2 + 1, n_freq) rfft along theta of z-normalised descriptors
@@ -51,8 +56,8 @@ def invariant_vectors(
         harmonics: lowest theta harmonics kept (clipped to n_theta // 2 + 1).
 
     Returns:
-        (vectors (..., kept * n_freq) float32, residual (...,) float32): u of the module
-        docstring for the kept harmonics, and the norm of the dropped part.
+        (kept (..., kept, n_freq) complex64: D^_w(k) sqrt(c_w / (n N)); residual (...,)
+        float32: the norm of the dropped harmonics, see the module docstring).
     """
     spectra = np.asarray(spectra)
     n_bins, n_freq = spectra.shape[-2:]
@@ -61,29 +66,44 @@ def invariant_vectors(
     if harmonics < 1:
         raise RaPlaceError(f"harmonics must be >= 1, got {harmonics}")
     scale = np.sqrt(harmonic_weights(n_theta, n_bins) / (n_theta * n_theta * n_freq))
-    u = np.abs(spectra).astype(np.float64) * scale[:, None]
+    scaled = spectra.astype(np.complex128) * scale[:, None]
     kept = min(harmonics, n_bins)
-    dropped = np.sqrt(np.sum(u[..., kept:, :] ** 2, axis=(-2, -1)))
-    vectors = u[..., :kept, :].reshape(*u.shape[:-2], kept * n_freq)
-    return vectors.astype(np.float32), dropped.astype(np.float32)
+    dropped = np.sqrt(np.sum(np.abs(scaled[..., kept:, :]) ** 2, axis=(-2, -1)))
+    return scaled[..., :kept, :].astype(np.complex64), dropped.astype(np.float32)
+
+
+def invariant_vectors(spectra: NDArray[np.complex64], n_theta: int) -> NDArray[np.float32]:
+    """Rotation-invariant global vectors |D^_w(k)| sqrt(c_w / (n N)) of descriptors.
+
+    Args:
+        spectra: (..., n_theta // 2 + 1, n_freq) theta-spectra of z-normalised descriptors.
+        n_theta: descriptor rows.
+
+    Returns:
+        (..., (n_theta // 2 + 1) * n_freq) float32 of unit norm (Parseval): the same for a
+        descriptor and any circular shift of it along theta.
+    """
+    kept, _ = scaled_harmonics(spectra, n_theta, n_theta // 2 + 1)
+    return np.abs(kept).reshape(*kept.shape[:-2], -1).astype(np.float32)
 
 
 class InvariantIndex:
-    """Rotation-invariant vectors of a database's entries, in insertion order."""
+    """The kept theta harmonics of a database's entries (one contiguous array per harmonic)."""
 
     def __init__(self, n_theta: int, n_freq: int, harmonics: int) -> None:
         self.n_theta = n_theta
         self.harmonics = min(harmonics, n_theta // 2 + 1)
-        self._vectors = GrowingArray((self.harmonics * n_freq,), np.float32)
+        self._kept = [GrowingArray((n_freq,), np.complex64) for _ in range(self.harmonics)]
         self._residual = GrowingArray((), np.float32)
 
     def __len__(self) -> int:
-        return len(self._vectors)
+        return len(self._residual)
 
     def extend(self, spectra: NDArray[np.complex64]) -> None:
         """Append the entries with (n, n_theta // 2 + 1, n_freq) theta-spectra."""
-        vectors, residual = invariant_vectors(spectra, self.n_theta, self.harmonics)
-        self._vectors.extend(vectors)
+        kept, residual = scaled_harmonics(spectra, self.n_theta, self.harmonics)
+        for w, store in enumerate(self._kept):
+            store.extend(kept[:, w])
         self._residual.extend(residual)
 
     def bound(self, spectrum: NDArray[np.complex64]) -> NDArray[np.float32]:
@@ -92,8 +112,13 @@ class InvariantIndex:
         Args:
             spectrum: (n_theta // 2 + 1, n_freq) theta-spectrum of the query descriptor.
         """
-        vector, residual = invariant_vectors(spectrum, self.n_theta, self.harmonics)
-        bound = self._vectors.values @ vector
+        kept, residual = scaled_harmonics(spectrum, self.n_theta, self.harmonics)
+        conj = np.conj(kept)
+        products = np.empty((self.harmonics, len(self)), dtype=np.complex64)
+        for w, store in enumerate(self._kept):
+            np.matmul(store.values, conj[w], out=products[w])
+        # Both spectra carry sqrt(c_w / (n N)): |products[w]| is c_w |X_w| / (n N).
+        bound = np.abs(products).sum(axis=0)
         bound += float(residual) * self._residual.values
         return bound
 

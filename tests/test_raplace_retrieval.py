@@ -181,26 +181,36 @@ def test_config_round_trip_is_strict() -> None:
     assert dataclasses.is_dataclass(ScanContextConfig())
 
 
-def _coarse_vector(desc: np.ndarray, cfg: RetrievalConfig, harmonics: int) -> tuple:
+def _coarse_vector(desc: np.ndarray, cfg: RetrievalConfig) -> np.ndarray:
     coarse = coarse_descriptor(desc, cfg.coarse_theta_pool, cfg.coarse_n_freq)
-    return invariant_vectors(theta_spectrum(coarse), coarse.shape[-2], harmonics)
+    return invariant_vectors(theta_spectrum(coarse), coarse.shape[-2])
 
 
 def test_invariant_vector_ignores_rotation_and_translation(route) -> None:
     world, poses, descriptors = route
     cfg = RetrievalConfig()
     x, y, yaw = poses[10]
-    here, _ = _coarse_vector(descriptors[10], cfg, harmonics=21)
+    here = _coarse_vector(descriptors[10], cfg)
     # A rotation by whole coarse rows (3 descriptor rows) is a circular shift: no change at all.
-    shifted, _ = _coarse_vector(np.roll(descriptors[10], 18, axis=0), cfg, harmonics=21)
+    shifted = _coarse_vector(np.roll(descriptors[10], 18, axis=0), cfg)
     np.testing.assert_allclose(shifted, here, atol=1e-6)
     assert np.linalg.norm(here) == pytest.approx(1.0, abs=1e-5)  # Parseval, all harmonics kept
     # Rotated by 37 deg (not a whole row, and more than the pi period away) and moved 2 m.
     turned = _describe(world, (x + 1.5, y - 1.2, yaw + np.deg2rad(37.0) + np.pi))
-    rotated, _ = _coarse_vector(turned, cfg, harmonics=21)
-    elsewhere, _ = _coarse_vector(descriptors[40], cfg, harmonics=21)
+    rotated = _coarse_vector(turned, cfg)
+    elsewhere = _coarse_vector(descriptors[40], cfg)
     assert float(rotated @ here) > 0.98
     assert float(rotated @ here) - float(elsewhere @ here) > 0.05
+    # The bound with the phases along k: invariant to whole-row shifts, best at the right place.
+    coarse = coarse_descriptor(descriptors, cfg.coarse_theta_pool, cfg.coarse_n_freq)
+    index = InvariantIndex(coarse.shape[1], cfg.coarse_n_freq, cfg.coarse_index_harmonics)
+    index.extend(theta_spectrum(coarse))
+    rolled = theta_spectrum(np.roll(coarse[10], 6, axis=0))
+    np.testing.assert_allclose(
+        index.bound(rolled), index.bound(theta_spectrum(coarse[10])), atol=1e-5
+    )
+    bound = index.bound(theta_spectrum(coarse_descriptor(turned, 3, cfg.coarse_n_freq)))
+    assert abs(int(np.argmax(bound)) - 10) <= 1 and bound.max() > 0.9
 
 
 def test_invariant_bound_never_exceeds_the_correlation_peak() -> None:

@@ -3,7 +3,8 @@
 A query scores database entries with the mutable-threshold distance of raplace.scoring. With
 `hierarchical` on, a query runs three stages, none with a Python loop over the database:
 1. rank the allowed entries by a rotation-invariant bound of their low-resolution correlation
-   (raplace.index: one matrix-vector product) and keep the best `coarse_shortlist`;
+   (raplace.index: one matrix-vector product per kept harmonic) and keep the best
+   `coarse_shortlist`;
 2. score those on low-resolution descriptors (`coarse_descriptor`) with the rotation search;
 3. re-score the best `coarse_candidates` and their `neighbour_radius` neighbours by insertion
    index at full resolution.

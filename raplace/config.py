@@ -137,8 +137,13 @@ class RetrievalConfig:
     """RaPlace database search with the mutable-threshold distance.
 
     Attributes:
-        hierarchical: score every entry on low-resolution descriptors first, then re-score the
-            best ones and their neighbours at full resolution; False scores all at full resolution.
+        hierarchical: rank the entries by a rotation-invariant bound (raplace.index), score the
+            best `coarse_shortlist` on low-resolution descriptors, then re-score the best ones and
+            their neighbours at full resolution; False scores all at full resolution.
+        coarse_shortlist: entries kept by the invariant bound for the low-resolution scoring
+            (0: score every allowed entry at low resolution).
+        coarse_index_harmonics: lowest theta harmonics of the low-resolution descriptor kept in
+            the invariant bound (raplace.index; the rest is bounded by its norm).
         coarse_theta_pool: descriptor rows averaged into one low-resolution row.
         coarse_n_freq: lowest frequency columns kept in the low-resolution descriptor.
         coarse_candidates: best entries by low-resolution distance that are re-scored.
@@ -153,6 +158,8 @@ class RetrievalConfig:
     coarse_theta_pool: int = 3
     coarse_n_freq: int = 8
     coarse_candidates: int = 25
+    coarse_shortlist: int = 400
+    coarse_index_harmonics: int = 8
     neighbour_radius: int = 2
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
     loop_threshold: float = 0.2
@@ -161,6 +168,13 @@ class RetrievalConfig:
         checks.at_least("coarse_theta_pool", self.coarse_theta_pool, 1)
         checks.at_least("coarse_n_freq", self.coarse_n_freq, 1)
         checks.at_least("coarse_candidates", self.coarse_candidates, 1)
+        checks.at_least("coarse_shortlist", self.coarse_shortlist, 0)
+        checks.at_least("coarse_index_harmonics", self.coarse_index_harmonics, 1)
+        if 0 < self.coarse_shortlist < self.coarse_candidates:
+            raise ValueError(
+                f"coarse_shortlist: must be 0 or at least coarse_candidates "
+                f"({self.coarse_candidates}), got {self.coarse_shortlist}"
+            )
         checks.at_least("neighbour_radius", self.neighbour_radius, 0)
         checks.in_range("loop_threshold", self.loop_threshold, 0.0, MAX_DISTANCE, open_low=True)
 

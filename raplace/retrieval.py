@@ -1,14 +1,19 @@
 """Keyframe database and place queries: `PlaceRecognizer` (RaPlace).
 
 A query scores database entries with the mutable-threshold distance of raplace.scoring. With
-`hierarchical` on, every entry is scored on low-resolution descriptors (`coarse_descriptor`),
-then the best `coarse_candidates` and their `neighbour_radius` neighbours by insertion index are
-re-scored at full resolution: a handful of batched FFTs and einsums per query, no Python loop over
-the database.
+`hierarchical` on, a query runs three stages, none with a Python loop over the database:
+1. rank the allowed entries by a rotation-invariant bound of their low-resolution correlation
+   (raplace.index: one matrix-vector product per kept harmonic) and keep the best
+   `coarse_shortlist`;
+2. score those on low-resolution descriptors (`coarse_descriptor`) with the rotation search;
+3. re-score the best `coarse_candidates` and their `neighbour_radius` neighbours by insertion
+   index at full resolution.
+`coarse_shortlist` 0 skips stage 1 (every allowed entry is scored at low resolution).
 
 The pieces shared with the Scan Context baseline (`Candidate`, `GrowingArray`,
 `candidate_mask`, `KeyframeIndex`, the .npz layout with `save_database` / `load_database`) live
-here too.
+here too. The invariant index is derived from the descriptors when they are added, so it is not
+stored: files keep format version 1.
 """
 
 from __future__ import annotations
@@ -28,15 +33,14 @@ from raplace import RaPlaceError
 from raplace.config import ExclusionConfig, RetrievalConfig
 from raplace.config_io import from_dict, to_dict
 from raplace.descriptor import coarse_descriptor
+from raplace.growing import GrowingArray  # re-exported: its home before raplace.growing
+from raplace.index import InvariantIndex
 from raplace.scoring import score, theta_spectrum
 
 log = logging.getLogger(__name__)
 
 ConfigT = TypeVar("ConfigT")
 DatabaseT = TypeVar("DatabaseT", bound="BatchDatabase")
-
-INITIAL_CAPACITY = 64
-"""Rows allocated by an empty GrowingArray; capacity doubles when full."""
 
 FILE_FORMAT_VERSION = 1
 
@@ -60,44 +64,6 @@ class Candidate:
     distance: float
     yaw_rad: float
     yaw_period_rad: float
-
-
-class GrowingArray:
-    """Append-only array of fixed-shape items with amortised O(1) appends."""
-
-    def __init__(self, item_shape: tuple[int, ...], dtype: np.dtype | type) -> None:
-        self._data = np.empty((INITIAL_CAPACITY, *item_shape), dtype=dtype)
-        self._count = 0
-
-    def __len__(self) -> int:
-        return self._count
-
-    @property
-    def item_shape(self) -> tuple[int, ...]:
-        return tuple(self._data.shape[1:])
-
-    @property
-    def values(self) -> NDArray:
-        """(len, *item_shape) view of the stored items (invalidated by the next append)."""
-        return self._data[: self._count]
-
-    def extend(self, items: NDArray) -> None:
-        """Append (n, *item_shape) items."""
-        items = np.asarray(items)
-        if items.shape[1:] != self.item_shape:
-            raise RaPlaceError(f"item shape {items.shape[1:]} != {self.item_shape}")
-        needed = self._count + len(items)
-        if needed > len(self._data):
-            capacity = max(needed, 2 * len(self._data))
-            grown = np.empty((capacity, *self.item_shape), dtype=self._data.dtype)
-            grown[: self._count] = self._data[: self._count]
-            self._data = grown
-        self._data[self._count : needed] = items
-        self._count = needed
-
-    def append(self, item: NDArray | float | int) -> None:
-        """Append one item of shape item_shape."""
-        self.extend(np.asarray(item)[None])
 
 
 def candidate_mask(
@@ -219,7 +185,11 @@ class KeyframeIndex:
 
     def allowed(self, time_s: float | None, exclusion: ExclusionConfig) -> NDArray[np.int64]:
         """Sorted indices of the entries a query at `time_s` may match (see `candidate_mask`)."""
-        return np.flatnonzero(candidate_mask(self._times.values, time_s, exclusion))
+        return np.flatnonzero(self.allowed_mask(time_s, exclusion))
+
+    def allowed_mask(self, time_s: float | None, exclusion: ExclusionConfig) -> NDArray[np.bool_]:
+        """(n_entries,) True where a query at `time_s` may match the entry (`candidate_mask`)."""
+        return candidate_mask(self._times.values, time_s, exclusion)
 
     def ranked(
         self,
@@ -287,6 +257,7 @@ class PlaceRecognizer:
         self._index = KeyframeIndex()
         self._full: GrowingArray | None = None  # (n, n_theta // 2 + 1, n_freq) complex64
         self._coarse: GrowingArray | None = None  # same for the coarse descriptors
+        self._invariant: InvariantIndex | None = None  # of the coarse descriptors
         self._shape: tuple[int, int] | None = None
 
     def __len__(self) -> int:
@@ -335,9 +306,11 @@ class PlaceRecognizer:
         elif shape != self._shape:
             raise RaPlaceError(f"descriptor shape {shape} != database shape {self._shape}")
         times = entry_times(times_s, keys)
-        assert self._full is not None and self._coarse is not None
+        assert self._full is not None and self._coarse is not None and self._invariant is not None
         self._full.extend(theta_spectrum(descriptors))
-        self._coarse.extend(theta_spectrum(self._coarse_of(descriptors)))
+        coarse_spectra = theta_spectrum(self._coarse_of(descriptors))
+        self._coarse.extend(coarse_spectra)
+        self._invariant.extend(coarse_spectra)
         self._index.extend(keys, times)
 
     def _init_storage(self, shape: tuple[int, int]) -> None:
@@ -352,6 +325,9 @@ class PlaceRecognizer:
         self._full = GrowingArray((n_theta // 2 + 1, n_freq), np.complex64)
         n_coarse = n_theta // pool
         self._coarse = GrowingArray((n_coarse // 2 + 1, self.cfg.coarse_n_freq), np.complex64)
+        self._invariant = InvariantIndex(
+            n_coarse, self.cfg.coarse_n_freq, self.cfg.coarse_index_harmonics
+        )
 
     def _coarse_of(self, descriptors: NDArray) -> NDArray[np.float32]:
         return coarse_descriptor(descriptors, self.cfg.coarse_theta_pool, self.cfg.coarse_n_freq)
@@ -376,28 +352,38 @@ class PlaceRecognizer:
         descriptor = np.asarray(descriptor, dtype=np.float32)
         if descriptor.shape != self._shape:
             raise RaPlaceError(f"query shape {descriptor.shape} != database shape {self._shape}")
-        allowed = self._index.allowed(time_s, self.cfg.exclusion)
-        if len(allowed) == 0:
+        allowed = self._index.allowed_mask(time_s, self.cfg.exclusion)
+        if not allowed.any():
             return []
         subset = self._shortlist(descriptor, allowed)
         assert self._full is not None
         distance, yaw = score(descriptor, self._full.values[subset])
         return self._index.ranked(subset, distance, yaw, k, yaw_period_rad=np.pi)
 
-    def _shortlist(self, descriptor: NDArray[np.float32], allowed: NDArray[np.int64]) -> NDArray:
-        """Entries scored at full resolution: all allowed, or the coarse winners' neighbours."""
+    def _shortlist(self, descriptor: NDArray[np.float32], allowed: NDArray[np.bool_]) -> NDArray:
+        """Entries scored at full resolution: all allowed, or the coarse winners' neighbours.
+
+        Args:
+            descriptor: (n_theta, n_freq) query descriptor.
+            allowed: (n_entries,) True where the entry may match.
+        """
         cfg = self.cfg
         budget = cfg.coarse_candidates * (2 * cfg.neighbour_radius + 1)
-        if not cfg.hierarchical or len(allowed) <= budget:
-            return allowed
-        assert self._coarse is not None
-        coarse_distance, _ = score(self._coarse_of(descriptor), self._coarse.values)
-        masked = np.full(len(self), np.inf)
-        masked[allowed] = coarse_distance[allowed]
-        n_best = min(cfg.coarse_candidates, len(allowed))
-        best = np.argpartition(masked, n_best - 1)[:n_best]
+        n_allowed = int(np.count_nonzero(allowed))
+        if not cfg.hierarchical or n_allowed <= budget:
+            return np.flatnonzero(allowed)
+        assert self._coarse is not None and self._invariant is not None
+        coarse_query = self._coarse_of(descriptor)
+        query_spectrum = theta_spectrum(coarse_query)
+        if cfg.coarse_shortlist:
+            listed = self._invariant.shortlist(query_spectrum, allowed, cfg.coarse_shortlist)
+        else:
+            listed = np.flatnonzero(allowed)
+        coarse_distance, _ = score(coarse_query, self._coarse.values[listed])
+        n_best = min(cfg.coarse_candidates, len(listed))
+        best = listed[np.argpartition(coarse_distance, n_best - 1)[:n_best]]
         around = neighbourhood(best, cfg.neighbour_radius, len(self))
-        return around[np.isfinite(masked[around])]
+        return around[allowed[around]]
 
     def is_loop(self, candidate: Candidate) -> bool:
         """True when the candidate's distance is below the configured loop threshold."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -17,9 +18,11 @@ from raplace.config import (
     ScanContextConfig,
 )
 from raplace.config_io import from_dict, to_dict
-from raplace.descriptor import descriptor, z_normalise
+from raplace.descriptor import coarse_descriptor, descriptor, z_normalise
+from raplace.index import InvariantIndex, invariant_vectors
 from raplace.retrieval import GrowingArray, PlaceRecognizer, candidate_mask
 from raplace.scancontext import ScanContextRecognizer
+from raplace.scoring import score, theta_spectrum
 
 WORLD_CELL_M = 0.25
 DESCRIPTOR = DescriptorConfig()
@@ -176,3 +179,122 @@ def test_config_round_trip_is_strict() -> None:
     with pytest.raises(RaPlaceError):
         from_dict(RaPlaceConfig, {"retrieval": {"coarse_candidatez": 3}})
     assert dataclasses.is_dataclass(ScanContextConfig())
+
+
+def _coarse_vector(desc: np.ndarray, cfg: RetrievalConfig) -> np.ndarray:
+    coarse = coarse_descriptor(desc, cfg.coarse_theta_pool, cfg.coarse_n_freq)
+    return invariant_vectors(theta_spectrum(coarse), coarse.shape[-2])
+
+
+def test_invariant_vector_ignores_rotation_and_translation(route) -> None:
+    world, poses, descriptors = route
+    cfg = RetrievalConfig()
+    x, y, yaw = poses[10]
+    here = _coarse_vector(descriptors[10], cfg)
+    # A rotation by whole coarse rows (3 descriptor rows) is a circular shift: no change at all.
+    shifted = _coarse_vector(np.roll(descriptors[10], 18, axis=0), cfg)
+    np.testing.assert_allclose(shifted, here, atol=1e-6)
+    assert np.linalg.norm(here) == pytest.approx(1.0, abs=1e-5)  # Parseval, all harmonics kept
+    # Rotated by 37 deg (not a whole row, and more than the pi period away) and moved 2 m.
+    turned = _describe(world, (x + 1.5, y - 1.2, yaw + np.deg2rad(37.0) + np.pi))
+    rotated = _coarse_vector(turned, cfg)
+    elsewhere = _coarse_vector(descriptors[40], cfg)
+    assert float(rotated @ here) > 0.98
+    assert float(rotated @ here) - float(elsewhere @ here) > 0.05
+    # The bound with the phases along k: invariant to whole-row shifts, best at the right place.
+    coarse = coarse_descriptor(descriptors, cfg.coarse_theta_pool, cfg.coarse_n_freq)
+    index = InvariantIndex(coarse.shape[1], cfg.coarse_n_freq, cfg.coarse_index_harmonics)
+    index.extend(theta_spectrum(coarse))
+    rolled = theta_spectrum(np.roll(coarse[10], 6, axis=0))
+    np.testing.assert_allclose(
+        index.bound(rolled), index.bound(theta_spectrum(coarse[10])), atol=1e-5
+    )
+    bound = index.bound(theta_spectrum(coarse_descriptor(turned, 3, cfg.coarse_n_freq)))
+    assert abs(int(np.argmax(bound)) - 10) <= 1 and bound.max() > 0.9
+
+
+def test_invariant_bound_never_exceeds_the_correlation_peak() -> None:
+    cfg = RetrievalConfig()
+    descs = _random_descriptors(60, seed=11)
+    query = z_normalise(descs[3] + 0.5 * _random_descriptors(1, seed=12)[0])
+    coarse = coarse_descriptor(descs, cfg.coarse_theta_pool, cfg.coarse_n_freq)
+    coarse_query = coarse_descriptor(query, cfg.coarse_theta_pool, cfg.coarse_n_freq)
+    exact, _ = score(coarse_query, theta_spectrum(coarse))
+    for harmonics in (1, 4, 21):
+        index = InvariantIndex(coarse.shape[1], cfg.coarse_n_freq, harmonics)
+        index.extend(theta_spectrum(coarse))
+        lower = 1.0 - index.bound(theta_spectrum(coarse_query))
+        assert np.all(lower <= exact + 1e-5)
+    # With every harmonic the bound is exact at the entry the query is a copy of (no rotation).
+    lower_all = 1.0 - index.bound(theta_spectrum(coarse[7]))
+    assert lower_all[7] == pytest.approx(0.0, abs=1e-5)
+
+
+@pytest.fixture(scope="module")
+def crowded(route):
+    """The route's keyframes among 600 distractors (more than the shortlist)."""
+    world, poses, descriptors = route
+    distractors = _random_descriptors(600, seed=21)
+    entries = np.concatenate([distractors[:300], descriptors, distractors[300:]])
+    return world, poses, entries
+
+
+def test_shortlisted_search_finds_what_exhaustive_finds(crowded) -> None:
+    world, poses, entries = crowded
+    new = PlaceRecognizer(RetrievalConfig(coarse_shortlist=40, exclusion=NO_EXCLUSION))
+    old = PlaceRecognizer(RetrievalConfig(coarse_shortlist=0, exclusion=NO_EXCLUSION))
+    exhaustive = PlaceRecognizer(RetrievalConfig(hierarchical=False, exclusion=NO_EXCLUSION))
+    for recognizer in (new, old, exhaustive):
+        recognizer.add_batch(entries, np.arange(len(entries)))
+    rng = np.random.default_rng(8)
+    for _ in range(6):
+        i = int(rng.integers(0, PATH_LENGTH))
+        x, y, yaw = poses[i]
+        turn = rng.uniform(-np.pi, np.pi)
+        query = _describe(world, (x + rng.uniform(-2, 2), y + rng.uniform(-2, 2), yaw + turn))
+        fast, before, slow = (r.query(query, k=1)[0] for r in (new, old, exhaustive))
+        assert fast.index == slow.index == before.index
+        assert abs(fast.index - 300 - i) <= 1
+        assert fast.distance == pytest.approx(slow.distance)
+
+
+def test_shortlist_respects_the_exclusion(crowded) -> None:
+    world, poses, entries = crowded
+    exclusion = ExclusionConfig(recent_keyframes=0, recent_seconds=100.0)
+    recognizer = PlaceRecognizer(RetrievalConfig(coarse_shortlist=40, exclusion=exclusion))
+    times = np.arange(len(entries), dtype=np.float64)  # the route is at 300..379 s
+    recognizer.add_batch(entries, np.arange(len(entries)), times)
+    x, y, yaw = poses[30]
+    query = _describe(world, (x, y, yaw + 0.4))
+    assert recognizer.query(query, k=1, time_s=1000.0)[0].index == 330
+    # At 429.5 s, entries after 329.5 s are too recent: the true place is excluded.
+    found = recognizer.query(query, k=10, time_s=429.5)
+    assert found and all(c.index <= 329 for c in found)
+    mask = candidate_mask(times, 429.5, exclusion)
+    index = InvariantIndex(40, 8, 16)
+    cfg = RetrievalConfig()
+    coarse = coarse_descriptor(entries, cfg.coarse_theta_pool, cfg.coarse_n_freq)
+    index.extend(theta_spectrum(coarse))
+    listed = index.shortlist(theta_spectrum(coarse[330]), mask, 40)
+    assert len(listed) == 40 and np.all(mask[listed]) and 330 not in listed
+    assert np.all(np.diff(listed) > 0)
+
+
+def test_shortlisted_database_round_trip_and_old_versions(crowded, tmp_path) -> None:
+    world, poses, entries = crowded
+    recognizer = PlaceRecognizer(RetrievalConfig(coarse_shortlist=40))
+    recognizer.add_batch(entries, np.arange(len(entries)) * 10)
+    path = tmp_path / "db.npz"
+    recognizer.save(path)
+    loaded = PlaceRecognizer.load(path)
+    x, y, yaw = poses[50]
+    query = _describe(world, (x - 1.0, y, yaw - 2.0))
+    before, after = recognizer.query(query, k=3), loaded.query(query, k=3)
+    assert [c.key for c in after] == [c.key for c in before] and before[0].key == 3500
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    meta = json.loads(str(arrays["meta"]))
+    old = tmp_path / "old.npz"
+    np.savez(old, **{**arrays, "meta": np.array(json.dumps({**meta, "version": 0}))})
+    with pytest.raises(RaPlaceError, match="old.npz.*version 0, expected 'raplace' version 1"):
+        PlaceRecognizer.load(old)

@@ -1,11 +1,12 @@
 """Profile the SLAM pipeline (cProfile) and print where the time goes by stage.
 
-Runs `radar_slam.pipeline.Pipeline` on a sequence under cProfile and splits the run by stage from
-the cumulative times of the pipeline's own step methods (one home for each stage):
+Runs `radar_slam.pipeline.Pipeline` on a sequence under cProfile, all in the main thread (no
+reader or loop thread: cProfile sees one thread; the results are the same), and splits the run by
+stage from the cumulative times of the pipeline's own step methods (one home for each stage):
 
     read/decode       Pipeline._read (the loader: PNG decode, polar array)
     odometry          Pipeline._track (Odometry.register)
-    loop detection    Pipeline._detect_loops + _resolve_pending, minus verification
+    loop detection    the loop runner's _step + finish, minus verification
       of which query  PlaceRecognizer.query (RaPlace retrieval over the database)
       of which descr. the RaPlace descriptor of each database scan
     verification      GeometricVerifier.__call__ (sinogram pose + phase correlation), with the
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import dataclasses
 import os
 import pstats
 import time
@@ -35,7 +37,7 @@ DEFAULT_SEQUENCES = ("synthetic/tiny_loop", "synthetic/loop")
 STAGES: dict[str, tuple[tuple[str, str], ...]] = {
     "read/decode": (("slam.py", "_read"),),
     "odometry": (("slam.py", "_track"),),
-    "loop detection": (("slam.py", "_detect_loops"), ("slam.py", "_resolve_pending")),
+    "loop detection": (("concurrency.py", "_step"), ("concurrency.py", "finish")),
     "verification": (("verification.py", "__call__"),),
     "graph": (("slam.py", "_extend_graph"), ("slam.py", "_close_loops")),
     "final": (("slam.py", "_optimise"), ("slam.py", "_evaluate")),
@@ -70,6 +72,8 @@ def stage_seconds(stats: pstats.Stats) -> dict[str, float]:
 def profile(spec: str, max_frames: int | None, top: int, stats_file: Path | None) -> None:
     sequence = open_sequence(spec)
     config = load_config(sequence.family)
+    in_main_thread = dataclasses.replace(config.concurrency, loop_thread=False, read_ahead_scans=0)
+    config = dataclasses.replace(config, concurrency=in_main_thread)
     pipeline = Pipeline(sequence, config, max_frames=max_frames)
     profiler = cProfile.Profile()
     start = time.perf_counter()

@@ -16,7 +16,9 @@ odometry). Loop factors join scans that entered the loop detector's database (ev
 Concurrency (`PipelineConfig.concurrency`): scans are read ahead on a reader thread, and the loop
 detector, which needs only the odometry poses, runs on a worker thread; the loops found for scan
 k enter the graph when the run reaches scan k + `loop_lag_scans`, with or without the thread, so
-the results do not depend on timing (`radar_slam.pipeline.concurrency`).
+the results do not depend on timing (`radar_slam.pipeline.concurrency`). With the thread, the step
+time "loop detection" is the worker's (it overlaps the others) and "loop wait" the main thread's
+waiting for it; a loop detector given to the pipeline is then called from the worker thread only.
 
 ISAM2 is updated whenever loops are added (so later loops are checked and initial guesses are
 made against the corrected estimate) and once at the end; a final batch pass (GNC by default)

@@ -58,6 +58,23 @@ def cumulative(stats: pstats.Stats, file_name: str, function: str) -> float:
     return total
 
 
+def calls(stats: pstats.Stats, file_name: str, function: str) -> int:
+    """Calls of every function `function` defined in a file called `file_name`."""
+    total = 0
+    for (path, _, name), row in stats.stats.items():  # type: ignore[attr-defined]
+        if name == function and Path(path).name == file_name:
+            total += row[1]
+    return total
+
+
+PER_CALL: dict[str, tuple[str, str]] = {
+    "verification per candidate": ("verification.py", "__call__"),
+    "RaPlace descriptor per database scan": ("descriptor.py", "descriptor"),
+    "scan reading per call": ("slam.py", "_reread"),
+}
+"""Label -> (file name, function) whose time per call is printed."""
+
+
 def stage_seconds(stats: pstats.Stats) -> dict[str, float]:
     """Seconds per stage; verification is taken out of loop detection (it runs inside it)."""
     seconds = {
@@ -95,6 +112,10 @@ def profile(spec: str, max_frames: int | None, top: int, stats_file: Path | None
         per_scan_ms = 1000 * seconds / frames
         print(f"  {stage:<30s} {seconds:7.2f} s {share:5.1f} %  {per_scan_ms:6.1f} ms/scan")
     print(f"  {'(sum of stages)':<30s} {total:7.2f} s")
+    for label, (file_name, function) in PER_CALL.items():
+        n = calls(stats, file_name, function)
+        ms = 1000 * cumulative(stats, file_name, function) / n if n else 0.0
+        print(f"  {label:<38s} {ms:6.1f} ms x {n} calls")
     print(f"\ntop {top} functions by own time:")
     stats.sort_stats("tottime").print_stats(top)
 

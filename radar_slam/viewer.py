@@ -129,12 +129,12 @@ class RerunViewer:
         gt = self._gt(pipeline, result.index)
         if gt is not None:
             self.stream.log("world/gt", self._strip(gt, "gt"))
-        tally = pipeline.loop_detector.tally()
+        tally = pipeline.loops.tally()  # issue-15: as the graph has seen it
         if tally != self._tally:
             self._tally = tally
             slam = pipeline.graph.estimates()
             self.stream.log("world/slam", self._strip(slam, "slam"))
-            self._log_loops(pipeline.loop_detector.decisions, slam)
+            self._log_loops(pipeline.loops.decisions, slam)
 
     def on_finish(self, results: Results) -> None:
         last = results.odometry

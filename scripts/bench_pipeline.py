@@ -1,9 +1,15 @@
 """Benchmark the whole SLAM pipeline: speed, accuracy, loops, and robustness to false loops.
 
 Runs `radar_slam.pipeline.Pipeline` on a sequence (default `synthetic/loop`, generated on first use
-at MulRan resolution: 400 azimuths x 3360 bins) on one core, and reports frames/s (wall clock and
-process CPU time, so a busy machine does not hide the cost), time per step, ATE of odometry and
-SLAM (Umeyama and first-pose aligned), KITTI drift, and loops proposed / accepted / true.
+at MulRan resolution: 400 azimuths x 3360 bins) and reports frames/s (wall clock and process CPU
+time, so a busy machine does not hide the cost), time per step, ATE of odometry and SLAM (Umeyama
+and first-pose aligned), KITTI drift, and loops proposed / accepted / true.
+
+`--workers` chooses the paths run one after the other in the same process (default both):
+1 = sequential on one core (pinned; no reader or loop thread), 2 = concurrent on two cores
+(scans read ahead, loops closed on a worker thread; `PipelineConfig.concurrency`). Both add the
+loops at the same scans, so their accuracy figures must agree; the table at the end puts them
+side by side. BLAS and OpenCV run single-threaded in both.
 
 `--inject-false F` adds the robustness experiment: on a fraction F of the database queries a
 random database scan is put first among the candidates; a fake verifier passes it when it lies
@@ -11,15 +17,18 @@ more than 50 m from the query (ground truth) with a plausible measurement (a sma
 as confident as a good real loop) and ignores it otherwise; real candidates are verified as
 usual. The report compares the SLAM ATE with and without the injection.
 
-Usage: python scripts/bench_pipeline.py [SEQ ...] [--max-frames N] [--inject-false F] [--json OUT]
+Usage: python scripts/bench_pipeline.py [SEQ ...] [--workers 1 2] [--max-frames N]
+       [--inject-false F] [--json OUT]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -33,10 +42,62 @@ from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
 from raplace.retrieval import PlaceRecognizer
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_raplace import pin_to_one_core  # noqa: E402
+
 logger = logging.getLogger("bench_pipeline")
 
 DEFAULT_SEQUENCES = ("synthetic/loop",)
 INJECTION_SEED = 1
+WORKER_CHOICES = (1, 2)
+COMPARED = (
+    ("frames_per_second", "scans/s wall", "{:.1f}"),
+    ("frames_per_cpu_second", "scans/s CPU", "{:.1f}"),
+    ("seconds", "wall [s]", "{:.1f}"),
+    ("cpu_seconds", "CPU [s]", "{:.1f}"),
+    ("ate_odometry_m", "ATE odometry [m]", "{:.6f}"),
+    ("ate_slam_m", "ATE SLAM [m]", "{:.6f}"),
+    ("drift_odometry_pct", "drift odometry [%]", "{:.4f}"),
+    ("drift_slam_pct", "drift SLAM [%]", "{:.4f}"),
+    ("loops_proposed", "loops proposed", "{}"),
+    ("loops_accepted", "loops accepted", "{}"),
+    ("loops_accepted_true", "loops true", "{}"),
+)
+"""(metrics row key, label, format) of the side-by-side table."""
+
+
+def with_workers(config: PipelineConfig, workers: int) -> PipelineConfig:
+    """The config of the sequential (1) or concurrent (2) path."""
+    concurrency = dataclasses.replace(
+        config.concurrency,
+        loop_thread=workers > 1,
+        read_ahead_scans=config.concurrency.read_ahead_scans if workers > 1 else 0,
+    )
+    return dataclasses.replace(config, concurrency=concurrency)
+
+
+def use_cores(workers: int, cores: set[int]) -> None:
+    """Run on one of `cores` (1 worker) or on `workers` of them."""
+    os.sched_setaffinity(0, set(sorted(cores)[:workers]))
+
+
+def side_by_side(rows: list[dict[str, object]]) -> str:
+    """The rows' speed, steps and accuracy as a table, one column per row."""
+    names = [str(r["sequence"]) for r in rows]
+    lines = [f"{'':<22s}" + "".join(f"{n:>28s}" for n in names)]
+    for key, label, fmt in COMPARED:
+        cells = [rows_value(r, key, fmt) for r in rows]
+        lines.append(f"{label:<22s}" + "".join(f"{c:>28s}" for c in cells))
+    steps = sorted({s for r in rows for s in r["timings_s"]})  # type: ignore[attr-defined]
+    for step in steps:
+        cells = [f"{r['timings_s'].get(step, 0.0):.2f}" for r in rows]  # type: ignore[attr-defined]
+        lines.append(f"{step + ' [s]':<22s}" + "".join(f"{c:>28s}" for c in cells))
+    return "\n".join(lines)
+
+
+def rows_value(row: dict[str, object], key: str, fmt: str) -> str:
+    value = row.get(key)
+    return "n/a" if value is None else fmt.format(value)
 
 
 def run_once(
@@ -102,6 +163,14 @@ def _f(value: float | None) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequences", nargs="*", default=list(DEFAULT_SEQUENCES))
+    parser.add_argument(
+        "--workers",
+        type=int,
+        nargs="+",
+        choices=WORKER_CHOICES,
+        default=list(WORKER_CHOICES),
+        help="1: sequential on one core; 2: concurrent on two (default: both, side by side)",
+    )
     parser.add_argument("--max-frames", type=int, default=None)
     parser.add_argument("--config", type=Path, default=None, help="YAML overrides")
     parser.add_argument("--data-root", type=Path, default=None)
@@ -112,15 +181,23 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("odometry").setLevel(logging.ERROR)
+    cores = os.sched_getaffinity(0)
+    pin_to_one_core()  # re-executes with single-threaded BLAS the first time
     cv2.setNumThreads(1)
-    if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
-        logger.warning("set OPENBLAS_NUM_THREADS=1 for one-core timings")
+    if len(cores) < max(args.workers):
+        logger.warning("only %d core(s) available: the 2-worker run shares them", len(cores))
     rows = []
     for spec in args.sequences:
         sequence = open_sequence(spec, args.data_root)
-        config = load_config(sequence.family, args.config)
-        results, cpu = run_once(sequence, config, args.max_frames, None)[:2]
-        rows.append(report(spec, results, cpu))
+        base_config = load_config(sequence.family, args.config)
+        paired = []
+        for workers in args.workers:
+            use_cores(workers, cores)
+            config = with_workers(base_config, workers)
+            results, cpu = run_once(sequence, config, args.max_frames, None)[:2]
+            paired.append(report(f"{spec} ({workers} core{'s' * (workers > 1)})", results, cpu))
+        rows += paired
+        logger.info("%s\n%s", spec, side_by_side(paired))
         if args.inject_false is not None:
             injected, cpu, passed = run_once(sequence, config, args.max_frames, args.inject_false)
             row = report(f"{spec} + {args.inject_false:.0%} false", injected, cpu)

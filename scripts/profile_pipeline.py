@@ -1,11 +1,12 @@
 """Profile the SLAM pipeline (cProfile) and print where the time goes by stage.
 
-Runs `radar_slam.pipeline.Pipeline` on a sequence under cProfile and splits the run by stage from
-the cumulative times of the pipeline's own step methods (one home for each stage):
+Runs `radar_slam.pipeline.Pipeline` on a sequence under cProfile, all in the main thread (no
+reader or loop thread: cProfile sees one thread; the results are the same), and splits the run by
+stage from the cumulative times of the pipeline's own step methods (one home for each stage):
 
     read/decode       Pipeline._read (the loader: PNG decode, polar array)
     odometry          Pipeline._track (Odometry.register)
-    loop detection    Pipeline._detect_loops + _resolve_pending, minus verification
+    loop detection    the loop runner's _step + finish, minus verification
       of which query  PlaceRecognizer.query (RaPlace retrieval over the database)
       of which descr. the RaPlace descriptor of each database scan
     verification      GeometricVerifier.__call__ (sinogram pose + phase correlation), with the
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import dataclasses
 import os
 import pstats
 import time
@@ -35,7 +37,7 @@ DEFAULT_SEQUENCES = ("synthetic/tiny_loop", "synthetic/loop")
 STAGES: dict[str, tuple[tuple[str, str], ...]] = {
     "read/decode": (("slam.py", "_read"),),
     "odometry": (("slam.py", "_track"),),
-    "loop detection": (("slam.py", "_detect_loops"), ("slam.py", "_resolve_pending")),
+    "loop detection": (("concurrency.py", "_step"), ("concurrency.py", "finish")),
     "verification": (("verification.py", "__call__"),),
     "graph": (("slam.py", "_extend_graph"), ("slam.py", "_close_loops")),
     "final": (("slam.py", "_optimise"), ("slam.py", "_evaluate")),
@@ -56,6 +58,23 @@ def cumulative(stats: pstats.Stats, file_name: str, function: str) -> float:
     return total
 
 
+def calls(stats: pstats.Stats, file_name: str, function: str) -> int:
+    """Calls of every function `function` defined in a file called `file_name`."""
+    total = 0
+    for (path, _, name), row in stats.stats.items():  # type: ignore[attr-defined]
+        if name == function and Path(path).name == file_name:
+            total += row[1]
+    return total
+
+
+PER_CALL: dict[str, tuple[str, str]] = {
+    "verification per candidate": ("verification.py", "__call__"),
+    "RaPlace descriptor per database scan": ("descriptor.py", "descriptor"),
+    "scan reading per call": ("slam.py", "_reread"),
+}
+"""Label -> (file name, function) whose time per call is printed."""
+
+
 def stage_seconds(stats: pstats.Stats) -> dict[str, float]:
     """Seconds per stage; verification is taken out of loop detection (it runs inside it)."""
     seconds = {
@@ -70,6 +89,8 @@ def stage_seconds(stats: pstats.Stats) -> dict[str, float]:
 def profile(spec: str, max_frames: int | None, top: int, stats_file: Path | None) -> None:
     sequence = open_sequence(spec)
     config = load_config(sequence.family)
+    in_main_thread = dataclasses.replace(config.concurrency, loop_thread=False, read_ahead_scans=0)
+    config = dataclasses.replace(config, concurrency=in_main_thread)
     pipeline = Pipeline(sequence, config, max_frames=max_frames)
     profiler = cProfile.Profile()
     start = time.perf_counter()
@@ -91,6 +112,10 @@ def profile(spec: str, max_frames: int | None, top: int, stats_file: Path | None
         per_scan_ms = 1000 * seconds / frames
         print(f"  {stage:<30s} {seconds:7.2f} s {share:5.1f} %  {per_scan_ms:6.1f} ms/scan")
     print(f"  {'(sum of stages)':<30s} {total:7.2f} s")
+    for label, (file_name, function) in PER_CALL.items():
+        n = calls(stats, file_name, function)
+        ms = 1000 * cumulative(stats, file_name, function) / n if n else 0.0
+        print(f"  {label:<38s} {ms:6.1f} ms x {n} calls")
     print(f"\ntop {top} functions by own time:")
     stats.sort_stats("tottime").print_stats(top)
 

@@ -148,6 +148,11 @@ class LoopClosureConfig:
         verification: geometric verification thresholds.
         covariance: covariance model of verified loops.
         consistency: pairwise consistency of verified loops.
+        scan_cache_mb: database scans kept in memory for verification [MiB] (the least
+            recently used beyond it are read again through the detector's `scan_loader`; about
+            1.3 MiB per MulRan scan).
+        pose_image_cache_mb: the verifier's pose images of database scans kept [MiB] (0.25 MiB
+            each with the default pose image).
     """
 
     enabled: bool = True
@@ -160,8 +165,12 @@ class LoopClosureConfig:
     verification: VerificationConfig = field(default_factory=VerificationConfig)
     covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
+    scan_cache_mb: float = 384.0  # issue-15
+    pose_image_cache_mb: float = 96.0  # issue-15
 
     def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.non_negative("scan_cache_mb", self.scan_cache_mb)
+        checks.non_negative("pose_image_cache_mb", self.pose_image_cache_mb)
         checks.at_least("candidates", self.candidates, 1)
         checks.at_least("loops_per_query", self.loops_per_query, 1)
         checks.positive("max_descriptor_distance", self.max_descriptor_distance)

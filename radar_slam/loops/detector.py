@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from odometry.deskew import twist_from_motion
 from odometry.scan import Scan
+from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
 from radar_slam.loops.records import (
@@ -99,8 +100,9 @@ class LoopDetector:
 
     Args:
         config: loop-closing settings (defaults when None).
-        scan_loader: returns the scan of a key again when it is needed for verification; without
-            it the detector keeps every database scan in memory (about 1.3 MB per MulRan scan).
+        scan_loader: returns the scan of a key again when it is needed for verification and is
+            no longer among the `config.scan_cache_mb` of recent scans kept; without it the
+            detector keeps every database scan in memory (about 1.3 MB per MulRan scan).
         recognizer: the place database (default: RaPlace `PlaceRecognizer`).
         verifier: the geometric verifier (default: `GeometricVerifier`).
 
@@ -128,6 +130,7 @@ class LoopDetector:
         self.verifier: Verifier = GeometricVerifier(cfg) if verifier is None else verifier
         self.gate = ConsistencyGate(cfg.consistency)
         self._entries: dict[int, _Entry] = {}
+        self._scans: ByteBudgetCache[Scan] = ByteBudgetCache(cfg.scan_cache_mb, _scan_bytes)
         self._decisions: list[LoopDecision] = []
         self._tally: Counter[str] = Counter()
         self._track = _Track()
@@ -248,8 +251,12 @@ class LoopDetector:
     def _scan_of(self, entry: _Entry) -> Scan:
         if entry.scan is not None:
             return entry.scan
-        assert self.scan_loader is not None
-        return self.scan_loader(entry.key)
+        scan = self._scans.get(entry.key)
+        if scan is None:
+            assert self.scan_loader is not None
+            scan = self.scan_loader(entry.key)
+            self._scans.put(entry.key, scan)
+        return scan
 
     def _query_and_insert(
         self, scan: Scan, pose: FloatArray | None, key: int, twist: FloatArray | None
@@ -272,6 +279,8 @@ class LoopDetector:
             scan=None if self.scan_loader is not None else scan,
         )
         self._entries[key] = entry
+        if entry.scan is None:
+            self._scans.put(key, scan)
         self.proposed += len(candidates)
         query = KeyScan(key, entry.timestamp_ns, scan, twist)
         changes: dict[int, LoopStatus] = {}
@@ -323,6 +332,12 @@ class LoopDetector:
             if status == "accepted":
                 accepted.append(new.constraint())
         return accepted
+
+
+def _scan_bytes(scan: Scan) -> int:
+    """Bytes a scan keeps in memory (its arrays)."""
+    arrays = (scan.polar, scan.azimuths_rad, scan.azimuth_times_ns)
+    return sum(int(np.asarray(a).nbytes) for a in arrays if a is not None)
 
 
 class NullLoopDetector:

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from odometry.deskew import motion_from_twist
 from odometry.registration import PreparedScan, prepare, register
 from odometry.scan import RadarFrame, Scan
+from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig, LoopCovarianceConfig
 from radar_slam.loops.records import KeyScan, Verification
 from raplace.pose import PoseEstimator, RelativePose
@@ -118,12 +119,17 @@ class GeometricVerifier:
     """Sinogram relative pose, refined by phase correlation (see the module docstring).
 
     Caches the current query's pose image and prepared scan, so verifying several candidates of
-    one query conditions the query scan once.
+    one query conditions the query scan once, and the pose images of recent database scans (by
+    key and time, within `cfg.pose_image_cache_mb`): a scan is often a candidate of several
+    queries.
     """
 
     def __init__(self, cfg: LoopClosureConfig) -> None:
         self.cfg = cfg
         self.pose_estimator = PoseEstimator(cfg.raplace.pose)
+        self._map_images: ByteBudgetCache[NDArray[np.float32]] = ByteBudgetCache(
+            cfg.pose_image_cache_mb, lambda image: int(image.nbytes)
+        )
         self._query_key: int | None = None
         self._query_image: NDArray[np.float32] | None = None
         self._query_prepared: PreparedScan | None = None
@@ -143,12 +149,20 @@ class GeometricVerifier:
             self._query_prepared = prepare(query.scan, self.cfg.refinement, query.twist)
         return self._query_prepared
 
+    def _map_image(self, match: KeyScan) -> NDArray[np.float32]:
+        key = (match.key, int(match.timestamp_ns))  # a key reused for another scan misses
+        image = self._map_images.get(key)
+        if image is None:
+            m = match.scan
+            image = self.pose_estimator.image(m.polar, m.azimuths_rad, m.range_resolution_m)
+            self._map_images.put(key, image)
+        return image
+
     def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
         """Verify T_query_match; never raises for a bad match (the reason says why)."""
         vcfg = self.cfg.verification
         query_image = self._query(query)
-        m = match.scan
-        map_image = self.pose_estimator.image(m.polar, m.azimuths_rad, m.range_resolution_m)
+        map_image = self._map_image(match)
         rel: RelativePose = self.pose_estimator.estimate(query_image, map_image)
         sinogram = motion_compensated(rel.as_array(), query, match)
         nan3 = np.full(3, np.nan)

@@ -16,6 +16,29 @@ from radar_slam.loops import (
     LoopClosureConfig,
 )
 from radar_slam.maps.config import MapsConfig  # issue-13: maps section
+from raplace import checks
+
+
+@dataclass(frozen=True)
+class ConcurrencyConfig:
+    """How a run uses threads (results do not depend on it, see `radar_slam.pipeline.concurrency`).
+
+    Attributes:
+        loop_thread: run the loop detector (RaPlace query, verification) on a worker thread
+            while the odometry goes on; False runs it in the main thread (same results).
+        loop_lag_scans: the loops found for scan k enter the pose graph when the run reaches
+            scan k + this (also without the thread, so that both give the same results); the
+            main thread waits for the worker when it is later than that.
+        read_ahead_scans: scans read ahead on a reader thread (0: read in the main thread).
+    """
+
+    loop_thread: bool = True
+    loop_lag_scans: int = 8
+    read_ahead_scans: int = 4
+
+    def __post_init__(self) -> None:
+        checks.at_least("loop_lag_scans", self.loop_lag_scans, 0)
+        checks.at_least("read_ahead_scans", self.read_ahead_scans, 0)
 
 
 @dataclass(frozen=True)
@@ -27,6 +50,7 @@ class PipelineConfig:
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
     maps: MapsConfig = field(default_factory=MapsConfig)  # issue-13: map building, localisation
+    concurrency: ConcurrencyConfig = field(default_factory=ConcurrencyConfig)  # issue-15
 
 
 def family_config_path(family: str) -> Path:

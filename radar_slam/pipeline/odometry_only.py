@@ -8,6 +8,7 @@ import numpy as np
 
 from odometry import Odometry
 from radar_slam.datasets.frame import RadarSequence
+from radar_slam.pipeline.concurrency import LockedReader, ScanReader
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.pipeline.records import (
     OdometryRun,
@@ -29,16 +30,21 @@ def run_odometry(
     max_frames: int | None = None,
     progress: ProgressCallback | None = None,
 ) -> OdometryRun:
-    """Odometry alone over a sequence: read -> register per scan, then evaluate."""
+    """Odometry alone over a sequence: read -> register per scan, then evaluate.
+
+    Scans are read ahead on a thread (`config.concurrency.read_ahead_scans`; a reading error is
+    raised at the scan where it happened)."""
     config = PipelineConfig() if config is None else config
     frames = frame_count(sequence, max_frames)
     odometry = Odometry(config.odometry)
     start = time.perf_counter()
     results = []
-    for index in range(frames):
-        results.append(odometry.register(sequence[index]))
-        if progress is not None:
-            progress(Progress(index + 1, frames, 0, 0, time.perf_counter() - start))
+    depth = config.concurrency.read_ahead_scans
+    with ScanReader(LockedReader(sequence), frames, depth) as reader:
+        for index in range(frames):
+            results.append(odometry.register(reader.next()))
+            if progress is not None:
+                progress(Progress(index + 1, frames, 0, 0, time.perf_counter() - start))
     seconds = time.perf_counter() - start
     stamps = np.array([r.timestamp_ns for r in results], dtype=np.int64)
     trajectory = Trajectory(stamps, np.array([r.pose for r in results]).reshape(-1, 3))

@@ -13,6 +13,13 @@ written from it is read back with the same meaning (g2o edges between consecutiv
 odometry). Loop factors join scans that entered the loop detector's database (every
 `query_spacing_m`).
 
+Concurrency (`PipelineConfig.concurrency`): scans are read ahead on a reader thread, and the loop
+detector, which needs only the odometry poses, runs on a worker thread; the loops found for scan
+k enter the graph when the run reaches scan k + `loop_lag_scans`, with or without the thread, so
+the results do not depend on timing (`radar_slam.pipeline.concurrency`). With the thread, the step
+time "loop detection" is the worker's (it overlaps the others) and "loop wait" the main thread's
+waiting for it; a loop detector given to the pipeline is then called from the worker thread only.
+
 ISAM2 is updated whenever loops are added (so later loops are checked and initial guesses are
 made against the corrected estimate) and once at the end; a final batch pass (GNC by default)
 follows, and accepted loops whose final weight falls below `BACKEND_REJECT_WEIGHT` are recorded as
@@ -34,6 +41,12 @@ from radar_slam.graph import LoopConstraint, PoseGraph
 from radar_slam.loops import (
     LoopDetectorProtocol,
     make_loop_detector,
+)
+from radar_slam.pipeline.concurrency import (
+    InlineLoopRunner,
+    LockedReader,
+    ScanReader,
+    make_loop_runner,
 )
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.pipeline.observer import PipelineObserver
@@ -85,6 +98,7 @@ class Pipeline:
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
+        self._read_scan = LockedReader(sequence)
         self.loop_detector: LoopDetectorProtocol = (
             make_loop_detector(self.config.loop_closure, scan_loader=self._reread)
             if loop_detector is None
@@ -95,20 +109,35 @@ class Pipeline:
         self._results: list[OdometryResult] = []
         self._loop_ids: dict[tuple[int, int], int] = {}  # (query, match) -> graph loop id
         self._start = 0.0
+        concurrency = self.config.concurrency
+        self.loops: InlineLoopRunner = make_loop_runner(
+            self.loop_detector, concurrency.loop_lag_scans, concurrency.loop_thread, self.timer
+        )
+        """The loop detector as the graph has seen it: `loops.tally()` and `loops.decisions`
+        are those of the loops added to the graph so far (read these, not the detector's, while
+        the run goes on: the detector may be ahead on its thread)."""
 
     def run(self) -> Results:
-        """Process every scan, optimise, evaluate; returns the results (call once)."""
+        """Process every scan, optimise, evaluate; returns the results (call once).
+
+        On an error or an interruption the threads are stopped before it propagates.
+        """
         self._start = time.perf_counter()
-        for index in range(self.frames):
-            frame = self._read(index)
-            result = self._track(frame)
-            self._extend_graph(result)
-            loops = self._detect_loops(frame, result)
-            self._close_loops(loops)
-            self._report(index + 1)
-            if self.observer is not None:
-                self.observer.on_scan(self, frame, result)
-        self._close_loops(self._resolve_pending())
+        reader = ScanReader(self._read_scan, self.frames, self.config.concurrency.read_ahead_scans)
+        try:
+            for index in range(self.frames):
+                frame = self._read(reader)
+                result = self._track(frame)
+                self._extend_graph(result)
+                self.loops.submit(frame, result.pose, result.index)
+                self._close_loops(self.loops.due(index))
+                self._report(index + 1)
+                if self.observer is not None:
+                    self.observer.on_scan(self, frame, result)
+            self._close_loops(self.loops.finish())
+        finally:
+            reader.close()
+            self.loops.close()
         self._optimise()
         self._review_loops()
         results = self._evaluate(time.perf_counter() - self._start)
@@ -117,13 +146,13 @@ class Pipeline:
         return results
 
     # -- per-scan steps -----------------------------------------------------------------------
-    def _read(self, index: int) -> RadarFrame:
+    def _read(self, reader: ScanReader) -> RadarFrame:
         with self.timer("read"):
-            return self.sequence[index]
+            return reader.next()
 
     def _reread(self, index: int) -> RadarFrame:
         """A database scan read again for loop verification (timed as loop detection)."""
-        return self.sequence[index]
+        return self._read_scan(index)
 
     def _track(self, frame: RadarFrame) -> OdometryResult:
         with self.timer("odometry"):
@@ -141,10 +170,6 @@ class Pipeline:
             self.graph.add_keyframe(result.index, self.graph.predict(previous, measurement))
             self.graph.add_odometry(previous, result.index, measurement, covariance)
 
-    def _detect_loops(self, frame: RadarFrame, result: OdometryResult) -> list[LoopConstraint]:
-        with self.timer("loop detection"):
-            return self.loop_detector.add(frame, result.pose, result.index)
-
     def _close_loops(self, loops: list[LoopConstraint]) -> None:
         if not loops:
             return
@@ -157,15 +182,11 @@ class Pipeline:
     def _report(self, done: int) -> None:
         if self.progress is None:
             return
-        accepted, rejected = self.loop_detector.tally()
+        accepted, rejected = self.loops.tally()
         elapsed = time.perf_counter() - self._start
         self.progress(Progress(done, self.frames, accepted, rejected, elapsed))
 
     # -- final steps --------------------------------------------------------------------------
-    def _resolve_pending(self) -> list[LoopConstraint]:
-        with self.timer("loop detection"):
-            return self.loop_detector.finish()
-
     def _optimise(self) -> None:
         with self.timer("optimisation"):
             if self.frames > 1:

@@ -176,6 +176,14 @@ class QualityConfig:
         velocity_lag_fraction: in `Odometry`, the error of the velocity that moves a pose from
             mid-sweep to the scan's reference time is taken as this fraction of the velocity's
             last change (it lags an accelerating or turning vehicle), per axis.
+        sigma_yaw_deg_per_deg: in `Odometry`, a registration's rotation error that its peak
+            does not show grows with the turn (less overlap, a changed perspective): this
+            fraction of the turn, as a standard deviation [deg/deg].
+        deskew_error_fraction: in `Odometry`, a scan de-skewed with a velocity that lags the
+            vehicle's (braking, a yaw-rate step) is bent by about the velocity's last change
+            times half a sweep; this multiple of that bend is added as a standard deviation
+            (translation [m] and rotation [rad]; above 1 because the measured change itself lags
+            the true one).
     """
 
     min_peak_quality: float = 6.0
@@ -190,6 +198,8 @@ class QualityConfig:
     gap_sigma_xy_m: float = 1.0
     gap_sigma_yaw_deg: float = 5.0
     velocity_lag_fraction: float = 0.25
+    sigma_yaw_deg_per_deg: float = 0.1
+    deskew_error_fraction: float = 1.25
 
     def __post_init__(self) -> None:
         for name in (
@@ -209,7 +219,12 @@ class QualityConfig:
             "gap_sigma_yaw_deg",
         ):
             checks.positive(name, getattr(self, name))
-        checks.non_negative("velocity_lag_fraction", self.velocity_lag_fraction)
+        for name in (
+            "velocity_lag_fraction",
+            "sigma_yaw_deg_per_deg",
+            "deskew_error_fraction",
+        ):
+            checks.non_negative(name, getattr(self, name))
 
 
 @dataclass(frozen=True)

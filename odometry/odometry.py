@@ -343,8 +343,11 @@ class Odometry:
                 estimate.covariance, change, scan, _image_interval_s(previous, scan, dt_s)
             ),
         )
+        registration_covariance = estimate.covariance + _unseen_covariance(
+            estimate.motion, change, scan, self.config
+        )
         covariance = rotate_covariance(
-            _factor_covariance(estimate.covariance, reference, node),
+            _factor_covariance(registration_covariance, reference, node),
             float(between(previous.pose, reference.pose)[2]),
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
@@ -576,3 +579,20 @@ def _factor_covariance(
             node.conversion_covariance, float(between(reference.pose, node.pose)[2])
         )
     )
+
+
+def _unseen_covariance(
+    motion: FloatArray, velocity_change: FloatArray, scan: PreparedScan, cfg: OdometryConfig
+) -> FloatArray:
+    """(3, 3) covariance [m^2, rad^2] of registration errors the correlation peak does not show
+    (`QualityConfig`): a rotation error growing with the turn of `motion` (3,) (dx, dy [m],
+    dyaw [rad]), and the bend of a scan de-skewed with a velocity that lags the vehicle's by
+    about `velocity_change` (3,) (its last change [m/s, m/s, rad/s]) over half a sweep. The
+    translation term is isotropic, so the axes it is expressed in do not matter."""
+    qcfg = cfg.quality
+    timing = scan.polar.timing
+    half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
+    bend = qcfg.deskew_error_fraction * half_sweep_s * np.abs(np.asarray(velocity_change))
+    sigma_xy_sq = float(bend[0] ** 2 + bend[1] ** 2)
+    sigma_yaw = qcfg.sigma_yaw_deg_per_deg * abs(wrap_angle(float(motion[2])))
+    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_yaw**2 + float(bend[2] ** 2)])

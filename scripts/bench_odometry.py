@@ -25,19 +25,24 @@ Usage: python scripts/bench_odometry.py [--frames N] [--speed MPS] [--yaw-rate D
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import logging
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+import odometry.odometry as odometry_module
 from odometry.deskew import motion_from_twist
 from odometry.odometry import Odometry, OdometryResult
+from odometry.registration import MotionEstimate
 from radar_slam.datasets import RadarFrame, open_sequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import evaluate
@@ -154,6 +159,24 @@ class SequenceRow:
     held_out: bool = False
 
 
+@contextlib.contextmanager
+def _counted_registrations() -> Iterator[list[int]]:
+    """Count the image registrations `Odometry` runs inside the block (CPU per scan without
+    timing it): yields a one-element list holding the count."""
+    calls = [0]
+    original = odometry_module.register_images
+
+    def counting(*args: Any, **kwargs: Any) -> MotionEstimate:
+        calls[0] += 1
+        return original(*args, **kwargs)
+
+    odometry_module.register_images = counting
+    try:
+        yield calls
+    finally:
+        odometry_module.register_images = original
+
+
 def bench_sequence(
     spec: str,
     data_root: Path | None,
@@ -170,22 +193,25 @@ def bench_sequence(
     n = len(sequence) if max_frames is None else min(len(sequence), max_frames)
     odometry = Odometry()
     durations = []
-    for k in range(n):
-        frame = sequence[k]
-        start = time.perf_counter()
-        odometry.register(frame)
-        durations.append(time.perf_counter() - start)
+    with _counted_registrations() as calls:
+        for k in range(n):
+            frame = sequence[k]
+            start = time.perf_counter()
+            odometry.register(frame)
+            durations.append(time.perf_counter() - start)
     ms = np.array(durations[1:]) * 1e3
     stamps = sequence.timestamps_ns[:n]
     estimate = Trajectory(stamps, odometry.poses)
     gap_run = odometry.longest_gap_run
     logger.info(
-        "%s: %d frames, %d keyframes, %d gaps (longest run %d); %.1f ms/frame -> %.1f frames/s",
+        "%s: %d frames, %d keyframes, %d gaps (longest run %d); %.2f registrations/frame; "
+        "%.1f ms/frame -> %.1f frames/s",
         label,
         n,
         len(odometry.keyframes),
         len(odometry.gaps),
         gap_run,
+        calls[0] / max(n - 1, 1),
         ms.mean(),
         1e3 / ms.mean(),
     )

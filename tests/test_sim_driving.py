@@ -218,8 +218,10 @@ def test_held_out_scenarios_are_marked() -> None:
     assert set(HELD_OUT) == {
         "heldout_town",
         "heldout_mixed",
+        "heldout_junctions",
         "tiny_heldout_town",
         "tiny_heldout_mixed",
+        "tiny_heldout_junctions",
     }
     for name in ("tiny", "tiny_loop", "loop", "reverse", "multisession_a", "long"):
         assert not SCENARIOS[name].held_out

@@ -379,6 +379,25 @@ _HELD_OUT_TOWN_ROUTE: Waypoints = (
 )
 """Out, round a block and back along the street it came (as the 25 % drift town drive), on, and
 back again after a U-turn."""
+_HELD_OUT_JUNCTIONS_ROUTE: Waypoints = (
+    (0, 0),
+    (1, 0),
+    (1, 1),
+    (2, 1),
+    (2, 2),
+    (3, 2),
+    (3, 3),
+    (4, 3),
+    (3, 3),
+    (3, 4),
+    (2, 4),
+    (1, 4),
+    (1, 3),
+    (0, 3),
+)
+"""A staircase of junction turns on small blocks, a U-turn short of a node and back, then a
+reversing stretch and more turns (issue 10's second held-out drive, added after the first
+was used for diagnosis)."""
 _HELD_OUT_MIXED_ROUTE: Waypoints = (
     (0, 1),
     (1, 1),
@@ -507,6 +526,26 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
                 Stop(9, 10.0),
             ),
             driving=PlanDrivingConfig(accel_mps2=3.0),
+        ),
+        held_out=True,
+    ),
+    Scenario(
+        name="heldout_junctions",
+        description="HELD OUT: a junction-dense staircase in a third town, a U-turn, reversing, "
+        "two stops",
+        seed=43,
+        waypoints=_HELD_OUT_JUNCTIONS_ROUTE,
+        town_routes=(_HELD_OUT_JUNCTIONS_ROUTE,),
+        start_ns=EPOCH_NS + 16 * DAY_NS,
+        town=_plan_town(n_blocks=(5, 5), block_size_m=(70.0, 90.0), **_WIDE_STREETS),
+        plan=DrivePlan(
+            events=(
+                Stop(2, 6.0),
+                TurnAround(7, "u_turn", 35.0),
+                Reverse(9, 35.0, 20.0),
+                Stop(12, 8.0),
+            ),
+            driving=PlanDrivingConfig(accel_mps2=2.5, cruise_speed_mps=(10.0, 13.0)),
         ),
         held_out=True,
     ),

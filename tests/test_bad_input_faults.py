@@ -25,6 +25,8 @@ from radar_slam.results import PARTIAL_SUFFIX
 POLL_S = 0.002
 TIMEOUT_S = 120.0
 RUN_FRAMES = "6"
+# the killed "running" case: the whole of `tiny`, so that writing starts seconds after the kill
+RUNNING_FRAMES = "60"
 
 
 def start(args: list[str | Path], cwd: Path) -> subprocess.Popen[bytes]:
@@ -105,22 +107,25 @@ def test_killed_run_leaves_latest_on_a_complete_result(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     monkeypatch.chdir(tmp_path)
-    args: list[str | Path] = [
-        "run",
-        "synthetic/tiny",
-        "--data-root",
-        synthetic_root,
-        "--max-frames",
-        RUN_FRAMES,
-        "--no-loops",
-    ]
-    first = run_cli(capsys, *args)
+
+    def args(frames: str) -> list[str | Path]:
+        return [
+            "run",
+            "synthetic/tiny",
+            "--data-root",
+            synthetic_root,
+            "--max-frames",
+            frames,
+            "--no-loops",
+        ]
+
+    first = run_cli(capsys, *args(RUN_FRAMES))
     assert first.code == 0, first.stderr
     parent = tmp_path / "results" / "synthetic_tiny"
     previous = (parent / "latest").resolve()
     assert complete(previous)
 
-    process = start(args, tmp_path)
+    process = start(args(RUNNING_FRAMES if point == "running" else RUN_FRAMES), tmp_path)
     ready = after(1.0) if point == "running" else staging_present(parent)
     killed = kill_when(process, ready, sig)
 
@@ -137,7 +142,7 @@ def test_killed_run_leaves_latest_on_a_complete_result(
     if (point, sig) != ("writing", signal.SIGKILL):
         return
     # the next run removes what a killed one left behind and moves `latest` to its result
-    again = run_cli(capsys, *args)
+    again = run_cli(capsys, *args(RUN_FRAMES))
     assert again.code == 0, again.stderr
     assert not [p for p in parent.iterdir() if PARTIAL_SUFFIX in p.name]
     assert (parent / "latest").resolve() not in (previous, latest)

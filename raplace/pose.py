@@ -163,7 +163,9 @@ def per_angle_shifts(
     """
     cross = query_rows * np.conj(map_rows)
     if whitening > 0:
-        cross /= np.maximum(np.abs(cross), WHITENING_EPS) ** np.float32(whitening)
+        magnitude = np.maximum(np.abs(cross), np.float32(WHITENING_EPS))
+        # sqrt is several times faster than a general power (the default whitening is 0.5).
+        cross /= np.sqrt(magnitude) if whitening == 0.5 else magnitude ** np.float32(whitening)
     cross[:, 0] = 0.0  # DC: no shift information
     n_l = 2 * (query_rows.shape[1] - 1) * upsample
     corr = scipy.fft.irfft(cross, n=n_l, axis=1, workers=1)  # peaks at l = b_i

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from radar_slam.datasets._io import read_gray_png
+from radar_slam.datasets._io import read_gray_png, transposed
 from radar_slam.datasets._png import PNG_SIGNATURE, decode_gray8
 from radar_slam.errors import DatasetFormatError
 
@@ -139,3 +139,9 @@ def test_reader_messages_unchanged_for_damaged_and_16_bit_files(
     cv2.imwrite(str(deep), image.astype(np.uint16) * 200)
     with pytest.raises(DatasetFormatError, match="expected an 8-bit single-channel PNG"):
         read_gray_png(deep, None)
+
+
+def test_transposed_is_a_contiguous_copy_of_the_transpose(image: NDArray[np.uint8]) -> None:
+    turned = transposed(image[:, 3:])  # a non-contiguous view too
+    np.testing.assert_array_equal(turned, image[:, 3:].T)
+    assert turned.flags.c_contiguous and turned.dtype == np.uint8

@@ -121,6 +121,9 @@ def test_damaged_files_are_left_to_opencv(image: NDArray[np.uint8]) -> None:
         + chunk(b"IEND", b"")
     )
     assert decode_gray8(bad_filter) is None
+    huge = struct.pack(">IIBBBBB", 1 << 20, 1 << 20, 8, 0, 0, 0, 0)  # 1 TB for a tiny stream
+    tiny = chunk(b"IDAT", zlib.compress(b"\x00" * 64)) + chunk(b"IEND", b"")
+    assert decode_gray8(PNG_SIGNATURE + chunk(b"IHDR", huge) + tiny) is None
     short_stream = PNG_SIGNATURE + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(b"\x00"))
     assert decode_gray8(short_stream + chunk(b"IEND", b"")) is None
 

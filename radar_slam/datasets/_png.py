@@ -28,6 +28,10 @@ IHDR = struct.Struct(">IIBBBBB")  # width, height, bit depth, colour type, compr
 GRAY = 0
 BIT_DEPTH_8 = 8
 ANCILLARY_BIT = 0x20  # bit 5 of a chunk type's first byte: ancillary (skippable) chunk
+MAX_PIXELS = 1 << 30
+"""Largest image decoded here (OpenCV's default limit, CV_IO_MAX_IMAGE_PIXELS)."""
+MAX_DEFLATE_RATIO = 1032
+"""Deflate expands its input at most about 1032-fold: a header promising more is damaged."""
 
 
 def decode_gray8(data: bytes) -> NDArray[np.uint8] | None:
@@ -42,6 +46,8 @@ def decode_gray8(data: bytes) -> NDArray[np.uint8] | None:
         return None
     (width, height), stream = parsed
     expected = (width + 1) * height  # one filter-type byte per row
+    if width * height > MAX_PIXELS or expected > MAX_DEFLATE_RATIO * len(stream):
+        return None  # no huge allocation for a damaged header: OpenCV decides
     try:
         raw = deflate.zlib_decompress(stream, expected)
     except deflate.DeflateError:

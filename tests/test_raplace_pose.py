@@ -130,7 +130,7 @@ def test_prepared_query_spectrum_gives_the_plain_pose(world) -> None:
     estimator = PoseEstimator(CFG)
     query_image = _crop(world, POSE_PAIRS[3][0])
     query = estimator.spectrum(query_image)
-    for pose_q, pose_m in POSE_PAIRS[3:]:
+    for _, pose_m in POSE_PAIRS[3:]:
         map_image = _crop(world, pose_m)
         reused = estimator.estimate_spectra(query, estimator.spectrum(map_image))
         assert reused == estimator.estimate(query_image, map_image)

@@ -75,6 +75,26 @@ class RelativePose:
 
 
 @dataclass(frozen=True)
+class PoseSpectrum:
+    """An image's 2-D spectrum prepared for `relative_pose_of`: made once per image, it serves
+    every pair the image takes part in (a query verified against several candidates).
+
+    Attributes:
+        fft: the padded 2-D DFT (`raplace.descriptor.image_spectrum`).
+        rows: (n_theta, n_freq) complex64 S^(theta_i, k_j) at theta_i = i pi / n_theta and
+            k_j = j * fft.freq_step_cpm, j = 0..size/2.
+    """
+
+    fft: ImageSpectrum
+    rows: NDArray[np.complex64]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the arrays take (for byte-budget caches)."""
+        return int(self.fft.grid.nbytes + self.rows.nbytes)
+
+
+@dataclass(frozen=True)
 class _Spectra:
     """Query rows and the sampling context shared by every hypothesis."""
 
@@ -143,7 +163,9 @@ def per_angle_shifts(
     """
     cross = query_rows * np.conj(map_rows)
     if whitening > 0:
-        cross /= np.maximum(np.abs(cross), WHITENING_EPS) ** np.float32(whitening)
+        magnitude = np.maximum(np.abs(cross), np.float32(WHITENING_EPS))
+        # sqrt is several times faster than a general power (the default whitening is 0.5).
+        cross /= np.sqrt(magnitude) if whitening == 0.5 else magnitude ** np.float32(whitening)
     cross[:, 0] = 0.0  # DC: no shift information
     n_l = 2 * (query_rows.shape[1] - 1) * upsample
     corr = scipy.fft.irfft(cross, n=n_l, axis=1, workers=1)  # peaks at l = b_i
@@ -246,6 +268,32 @@ def _refine(spectra: _Spectra, best: _Hypothesis, cfg: PoseConfig) -> _Hypothesi
     return refined if refined.residual <= best.residual else best
 
 
+def pose_angles(n_theta: int) -> NDArray[np.float64]:
+    """(n_theta,) angles theta_i = i pi / n_theta [rad] of the pose estimate's radial lines."""
+    return np.arange(n_theta, dtype=np.float64) * (np.pi / n_theta)
+
+
+def pose_freqs(fft: ImageSpectrum) -> NDArray[np.float64]:
+    """(size / 2 + 1,) frequencies k_j = j * freq_step [cycles/m] of the radial lines."""
+    return np.arange(fft.size // 2 + 1, dtype=np.float64) * fft.freq_step_cpm
+
+
+def pose_spectrum(cart: NDArray, cell_m: float, cfg: PoseConfig) -> PoseSpectrum:
+    """The spectrum of one Cartesian image for `relative_pose_of`.
+
+    Args:
+        cart: (n, n) image (raplace.warp convention), e.g. from `PoseEstimator.image`.
+        cell_m: pixel size [m].
+        cfg: pose settings (n_theta must be even).
+    """
+    if cfg.n_theta < 4 or cfg.n_theta % 2:
+        raise RaPlaceError(f"pose n_theta must be even and >= 4, got {cfg.n_theta}")
+    fft = image_spectrum(cart, cell_m, cfg.pad_factor)
+    return PoseSpectrum(
+        fft=fft, rows=radial_spectrum(fft, pose_angles(cfg.n_theta), pose_freqs(fft))
+    )
+
+
 def relative_pose(
     query_cart: NDArray, map_cart: NDArray, cell_m: float, cfg: PoseConfig
 ) -> RelativePose:
@@ -263,22 +311,30 @@ def relative_pose(
     query_cart = np.asarray(query_cart)
     if query_cart.shape != np.shape(map_cart):
         raise RaPlaceError(f"image shapes differ: {query_cart.shape} vs {np.shape(map_cart)}")
-    if cfg.n_theta < 4 or cfg.n_theta % 2:
-        raise RaPlaceError(f"pose n_theta must be even and >= 4, got {cfg.n_theta}")
-    query_fft = image_spectrum(query_cart, cell_m, cfg.pad_factor)
-    map_fft = image_spectrum(map_cart, cell_m, cfg.pad_factor)
-    thetas = np.arange(cfg.n_theta, dtype=np.float64) * (np.pi / cfg.n_theta)
-    freqs = np.arange(query_fft.size // 2 + 1, dtype=np.float64) * query_fft.freq_step_cpm
+    query = pose_spectrum(query_cart, cell_m, cfg)
+    return relative_pose_of(query, pose_spectrum(map_cart, cell_m, cfg), cfg)
+
+
+def relative_pose_of(query: PoseSpectrum, map_: PoseSpectrum, cfg: PoseConfig) -> RelativePose:
+    """`relative_pose` from the two images' `pose_spectrum`s (made with the same `cfg`)."""
+    if query.fft.grid.shape != map_.fft.grid.shape or query.fft.cell_m != map_.fft.cell_m:
+        raise RaPlaceError(
+            f"spectra differ: {query.fft.grid.shape} at {query.fft.cell_m} m vs "
+            f"{map_.fft.grid.shape} at {map_.fft.cell_m} m"
+        )
+    if query.rows.shape[0] != cfg.n_theta or map_.rows.shape[0] != cfg.n_theta:
+        raise RaPlaceError(f"spectra were not made with n_theta = {cfg.n_theta}")
+    thetas = pose_angles(cfg.n_theta)
+    freqs = pose_freqs(query.fft)
     spectra = _Spectra(
-        query=radial_spectrum(query_fft, thetas, freqs),
-        map_fft=map_fft,
+        query=query.rows,
+        map_fft=map_.fft,
         thetas=thetas,
         freqs=freqs,
-        period_m=1.0 / query_fft.freq_step_cpm,
+        period_m=1.0 / query.fft.freq_step_cpm,
     )
-    map_same_angles = radial_spectrum(map_fft, thetas, freqs)
     hypotheses: list[_Hypothesis] = []
-    for yaw in rotation_candidates(spectra.query, map_same_angles, freqs, cfg.rotation_peaks):
+    for yaw in rotation_candidates(spectra.query, map_.rows, freqs, cfg.rotation_peaks):
         rows = _map_rows(spectra, float(yaw))
         hypotheses.append(_solve(spectra, float(yaw), rows, cfg))
         # S^(theta - yaw - pi, k) = conj S^(theta - yaw, k) for a real image.
@@ -313,6 +369,14 @@ class PoseEstimator:
         """The pose-resolution Cartesian image of a scan (cache it to verify many candidates)."""
         return self.imager(polar, azimuths_rad, range_resolution_m)
 
+    def spectrum(self, image: NDArray) -> PoseSpectrum:
+        """The `pose_spectrum` of an image made by `image` (cache it to verify many pairs)."""
+        return pose_spectrum(image, self.cfg.image.cell_m, self.cfg)
+
     def estimate(self, query_image: NDArray, map_image: NDArray) -> RelativePose:
         """T_query_map from two images made by `image`."""
         return relative_pose(query_image, map_image, self.cfg.image.cell_m, self.cfg)
+
+    def estimate_spectra(self, query: PoseSpectrum, map_: PoseSpectrum) -> RelativePose:
+        """T_query_map from two images' `spectrum`s (the same result as `estimate`)."""
+        return relative_pose_of(query, map_, self.cfg)

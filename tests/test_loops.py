@@ -83,6 +83,20 @@ def test_verifier_accepts_a_revisit_and_rejects_a_wrong_candidate(tiny: RadarSeq
     assert np.all(np.isnan(wrong.covariance))
 
 
+def test_verifier_caches_give_the_fresh_result(tiny: RadarSequence) -> None:
+    """A verifier reusing its query and database-scan caches decides and measures exactly as a
+    fresh one (same query twice, then a database scan verified again for another query)."""
+    reused = GeometricVerifier(LoopClosureConfig())
+    for query, match in ((40, 36), (40, 5), (41, 36)):
+        cached = reused(key_scan(tiny, query), key_scan(tiny, match))
+        fresh = GeometricVerifier(LoopClosureConfig())(key_scan(tiny, query), key_scan(tiny, match))
+        assert (cached.ok, cached.reason) == (fresh.ok, fresh.reason)
+        for field in ("measurement", "covariance", "sinogram"):
+            np.testing.assert_array_equal(getattr(cached, field), getattr(fresh, field))
+        assert cached.sinogram_quality == fresh.sinogram_quality
+        assert cached.refined_quality == fresh.refined_quality
+
+
 def test_loop_covariance_grows_as_quality_falls() -> None:
     cfg = LoopCovarianceConfig()
     width_px2, cell_m, scale = 2.0, 0.25, 3.0  # a peak like the odometry's fine level

@@ -123,3 +123,18 @@ def test_fit_translation_rejects_outliers() -> None:
 def test_relative_pose_rejects_mismatched_images() -> None:
     with pytest.raises(RaPlaceError):
         relative_pose(np.zeros((64, 64)), np.zeros((32, 32)), 0.5, CFG)
+
+
+def test_prepared_query_spectrum_gives_the_plain_pose(world) -> None:
+    """One query spectrum reused against several maps gives exactly the two-image result."""
+    estimator = PoseEstimator(CFG)
+    query_image = _crop(world, POSE_PAIRS[3][0])
+    query = estimator.spectrum(query_image)
+    for _, pose_m in POSE_PAIRS[3:]:
+        map_image = _crop(world, pose_m)
+        reused = estimator.estimate_spectra(query, estimator.spectrum(map_image))
+        assert reused == estimator.estimate(query_image, map_image)
+        _check(reused, relative(POSE_PAIRS[3][0], pose_m))
+    with pytest.raises(RaPlaceError, match="spectra differ"):
+        small = estimator.spectrum(query_image[:-2, :-2])
+        estimator.estimate_spectra(query, small)

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from radar_slam.datasets._png import decode_gray8
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.navtech import (
     ENCODER_TICKS_PER_REV,
@@ -44,6 +45,10 @@ def read_gray_png(path: Path, shape: tuple[int, int] | None) -> NDArray[np.uint8
     """
     if not path.is_file():
         raise DatasetFormatError(f"{path}: scan file is missing")
+    fast = _decode_fast(path)
+    if fast is not None:
+        return _checked_shape(fast, path, shape)
+    # Another PNG layout, or a damaged file: OpenCV reads or rejects it.
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise DatasetFormatError(f"{path}: cannot decode PNG (unreadable or truncated file)")
@@ -52,13 +57,37 @@ def read_gray_png(path: Path, shape: tuple[int, int] | None) -> NDArray[np.uint8
             f"{path}: expected an 8-bit single-channel PNG, got {image.dtype} with shape "
             f"{image.shape}"
         )
+    # OpenCV's stubs return a generic MatLike; the dtype was checked to be uint8 above.
+    return _checked_shape(cast(NDArray[np.uint8], image), path, shape)
+
+
+def transposed(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """A contiguous copy of `image.T` (a scan stored as range bins x azimuths turned into the
+    (n_azimuths, n_bins) polar layout); OpenCV's blocked transpose is several times faster than
+    numpy's strided copy of a full-resolution scan."""
+    # OpenCV's stubs return a generic MatLike; a transpose keeps the uint8 dtype.
+    return cast(NDArray[np.uint8], cv2.transpose(np.ascontiguousarray(image)))
+
+
+def _checked_shape(
+    image: NDArray[np.uint8], path: Path, shape: tuple[int, int] | None
+) -> NDArray[np.uint8]:
+    """`image` when its shape is `shape` (or `shape` is None); DatasetFormatError otherwise."""
     if shape is not None and image.shape != shape:
         raise DatasetFormatError(
             f"{path}: scan has shape {image.shape[0]} x {image.shape[1]}, expected "
             f"{shape[0]} x {shape[1]}"
         )
-    # OpenCV's stubs return a generic MatLike; the dtype was checked to be uint8 above.
-    return cast(NDArray[np.uint8], image)
+    return image
+
+
+def _decode_fast(path: Path) -> NDArray[np.uint8] | None:
+    """`path` decoded by the fast 8-bit grayscale decoder, or None (see `_png.decode_gray8`)."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    return decode_gray8(data)
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,7 @@ from radar_slam.datasets._io import (
     parse_navtech_header,
     read_gray_png,
     read_numeric_table,
+    transposed,
 )
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.navtech import (
@@ -346,7 +347,7 @@ class MulRanSequence:
             azimuth_times = header.times
         else:
             image = read_gray_png(path, (self.n_bins, MULRAN_N_AZIMUTHS))
-            polar = np.ascontiguousarray(image.T)
+            polar = transposed(image)
             azimuths = column_azimuths_rad(MULRAN_N_AZIMUTHS)
             azimuth_times = uniform_azimuth_times_ns(
                 stamp, int(self._periods_ns[index]), MULRAN_N_AZIMUTHS

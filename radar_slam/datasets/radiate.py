@@ -21,7 +21,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.datasets._io import check_strictly_increasing, frame_index, read_gray_png
+from radar_slam.datasets._io import (
+    check_strictly_increasing,
+    frame_index,
+    read_gray_png,
+    transposed,
+)
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.navtech import ENCODER_TICKS_PER_REV, encoder_to_azimuth_ccw
 from radar_slam.datasets.registry import Family, register
@@ -137,7 +142,7 @@ class RadiateSequence:
         image = read_gray_png(self._paths[index], (RADIATE_N_BINS, RADIATE_N_AZIMUTHS))
         return RadarFrame(
             timestamp_ns=int(self._times_ns[index]),
-            polar=np.ascontiguousarray(image.T),
+            polar=transposed(image),
             azimuths_rad=radiate_azimuths_rad() + self.azimuth_offset_rad,
             range_resolution_m=self.range_resolution_m,
             sensor=RADIATE_SENSOR,

@@ -151,8 +151,8 @@ class LoopClosureConfig:
         scan_cache_mb: database scans kept in memory for verification [MiB] (the least
             recently used beyond it are read again through the detector's `scan_loader`; about
             1.3 MiB per MulRan scan).
-        pose_image_cache_mb: the verifier's pose images of database scans kept [MiB] (0.25 MiB
-            each with the default pose image).
+        pose_image_cache_mb: the verifier's pose spectra of database scans kept [MiB] (about
+            0.6 MiB each with the default pose image).
     """
 
     enabled: bool = True

@@ -23,7 +23,7 @@ from odometry.scan import RadarFrame, Scan
 from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig, LoopCovarianceConfig
 from radar_slam.loops.records import KeyScan, Verification
-from raplace.pose import PoseEstimator, RelativePose
+from raplace.pose import PoseEstimator, PoseSpectrum, RelativePose
 from raplace.se2 import between, compose, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
@@ -118,52 +118,52 @@ class Verifier(Protocol):
 class GeometricVerifier:
     """Sinogram relative pose, refined by phase correlation (see the module docstring).
 
-    Caches the current query's pose image and prepared scan, so verifying several candidates of
-    one query conditions the query scan once, and the pose images of recent database scans (by
-    key and time, within `cfg.pose_image_cache_mb`): a scan is often a candidate of several
+    Caches the current query's pose spectrum and prepared scan, so verifying several candidates
+    of one query conditions the query scan once, and the pose spectra of recent database scans
+    (by key and time, within `cfg.pose_image_cache_mb`): a scan is often a candidate of several
     queries.
     """
 
     def __init__(self, cfg: LoopClosureConfig) -> None:
         self.cfg = cfg
         self.pose_estimator = PoseEstimator(cfg.raplace.pose)
-        self._map_images: ByteBudgetCache[NDArray[np.float32]] = ByteBudgetCache(
-            cfg.pose_image_cache_mb, lambda image: int(image.nbytes)
+        self._map_spectra: ByteBudgetCache[PoseSpectrum] = ByteBudgetCache(
+            cfg.pose_image_cache_mb, lambda spectrum: spectrum.nbytes
         )
         self._query_key: int | None = None
-        self._query_image: NDArray[np.float32] | None = None
+        self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
 
-    def _query(self, query: KeyScan) -> NDArray[np.float32]:
-        if self._query_key != query.key or self._query_image is None:
-            s = query.scan
+    def _spectrum(self, scan: Scan) -> PoseSpectrum:
+        image = self.pose_estimator.image(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
+        return self.pose_estimator.spectrum(image)
+
+    def _query(self, query: KeyScan) -> PoseSpectrum:
+        if self._query_key != query.key or self._query_spectrum is None:
             self._query_key = query.key
-            self._query_image = self.pose_estimator.image(
-                s.polar, s.azimuths_rad, s.range_resolution_m
-            )
+            self._query_spectrum = self._spectrum(query.scan)
             self._query_prepared = None
-        return self._query_image
+        return self._query_spectrum
 
     def _prepared_query(self, query: KeyScan) -> PreparedScan:
         if self._query_prepared is None:
             self._query_prepared = prepare(query.scan, self.cfg.refinement, query.twist)
         return self._query_prepared
 
-    def _map_image(self, match: KeyScan) -> NDArray[np.float32]:
+    def _map_spectrum(self, match: KeyScan) -> PoseSpectrum:
         key = (match.key, int(match.timestamp_ns))  # a key reused for another scan misses
-        image = self._map_images.get(key)
-        if image is None:
-            m = match.scan
-            image = self.pose_estimator.image(m.polar, m.azimuths_rad, m.range_resolution_m)
-            self._map_images.put(key, image)
-        return image
+        spectrum = self._map_spectra.get(key)
+        if spectrum is None:
+            spectrum = self._spectrum(match.scan)
+            self._map_spectra.put(key, spectrum)
+        return spectrum
 
     def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
         """Verify T_query_match; never raises for a bad match (the reason says why)."""
         vcfg = self.cfg.verification
-        query_image = self._query(query)
-        map_image = self._map_image(match)
-        rel: RelativePose = self.pose_estimator.estimate(query_image, map_image)
+        rel: RelativePose = self.pose_estimator.estimate_spectra(
+            self._query(query), self._map_spectrum(match)
+        )
         sinogram = motion_compensated(rel.as_array(), query, match)
         nan3 = np.full(3, np.nan)
         nan33 = np.full((3, 3), np.nan)

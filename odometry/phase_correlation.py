@@ -13,9 +13,12 @@ when the content of `mov` is that of `ref` moved by +d pixels.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -89,12 +92,25 @@ def gaussian_lowpass(shape: tuple[int, int], sigma_px: float) -> NDArray[np.floa
     return weights
 
 
+@functools.lru_cache(maxsize=4)
+def half_turn_ramp(size_px: int) -> NDArray[np.complex64]:
+    """exp(2 pi i (k_r + k_c) / n) on the half spectrum of a square image: the spectrum of the
+    image turned by pi is this times its conjugate spectrum (the grid is centred between
+    pixels)."""
+    k_r = np.fft.fftfreq(size_px)[:, None]
+    k_c = np.fft.rfftfreq(size_px)[None, :]
+    ramp = np.exp(2j * np.pi * (k_r + k_c)).astype(np.complex64)
+    ramp.setflags(write=False)
+    return ramp
+
+
 def correlate(
     f_ref: HalfSpectrum,
     f_mov: HalfSpectrum,
     shape: tuple[int, int],
     smoothing_px: float,
     whitening: float = 1.0,
+    half_turn: bool = False,
 ) -> FloatImage:
     """Phase-correlation surface (H, W) float32 of two half spectra of images of `shape`.
 
@@ -104,7 +120,58 @@ def correlate(
         smoothing_px: Gaussian width of the peak [pixels].
         whitening: exponent of the magnitude normalisation (1: phase only; 0: plain
             cross-correlation).
+        half_turn: correlate with the moved image turned by pi (square images only; its
+            spectrum is `half_turn_ramp` times the conjugate of `f_mov`).
+
+    The cross-power spectrum is made in one compiled pass (`_cross_power_kernel`, float64
+    arithmetic, no temporaries); `correlate_reference` is the same in numpy operations.
     """
+    weights = gaussian_lowpass(shape, float(smoothing_px))
+    ramp = half_turn_ramp(shape[0]) if half_turn else _NO_RAMP
+    cross = np.empty(weights.shape, dtype=np.complex64)
+    _cross_power_kernel(f_ref, f_mov, weights, ramp, half_turn, float(whitening), cross)
+    return cast(FloatImage, np.fft.irfft2(cross, s=shape))  # float32 from complex64
+
+
+_NO_RAMP = np.zeros((1, 1), dtype=np.complex64)
+
+
+@numba.njit(nogil=True, cache=True)
+def _cross_power_kernel(f_ref, f_mov, weights, ramp, half_turn, whitening, out):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out = weights * C / (|C| + eps) ** whitening with C = mov * conj(ref) (mov replaced by
+    ramp * conj(mov) for a half turn), element by element in float32 like numpy's complex64."""
+    eps = np.float32(SPECTRUM_EPS)
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            m = f_mov[i, j]
+            m_re = m.real
+            m_im = m.imag
+            if half_turn:
+                p = ramp[i, j]
+                m_re, m_im = p.real * m_re + p.imag * m_im, p.imag * m_re - p.real * m_im
+            r = f_ref[i, j]
+            c_re = m_re * r.real + m_im * r.imag
+            c_im = m_im * r.real - m_re * r.imag
+            scale = weights[i, j]
+            if whitening > 0.0:
+                magnitude = np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + eps
+                if whitening != 1.0:
+                    magnitude = np.float32(magnitude**whitening)
+                scale = scale / magnitude
+            out[i, j] = complex(c_re * scale, c_im * scale)
+
+
+def correlate_reference(
+    f_ref: HalfSpectrum,
+    f_mov: HalfSpectrum,
+    shape: tuple[int, int],
+    smoothing_px: float,
+    whitening: float = 1.0,
+    half_turn: bool = False,
+) -> FloatImage:
+    """`correlate` in plain numpy operations (the reference its kernel is tested against)."""
+    if half_turn:
+        f_mov = half_turn_ramp(shape[0]) * np.conj(f_mov)
     cross = f_mov * np.conj(f_ref)
     if whitening > 0:
         magnitude = np.abs(cross) + np.float32(SPECTRUM_EPS)
@@ -126,44 +193,98 @@ def locate_peak(
         smoothing_px: the peak's Gaussian width [pixels] (sets the noise exclusion zone).
         center_px, radius_px: restrict the search to shifts within `radius_px` (Chebyshev) of
             `center_px` (rows, cols); None searches everywhere.
+
+    The integer peak is refined by a quadratic fit of the log surface on its 3 x 3
+    neighbourhood; the noise is the standard deviation of the surface outside a band of rows
+    around the peak (both compiled: `_fit_log_quadratic`, `_std_outside_rows`).
     """
     h, w = surface.shape
     if center_px is None or radius_px is None:
-        flat = int(np.argmax(surface))
-        i0, j0 = divmod(flat, w)
+        i0, j0 = divmod(int(np.argmax(surface)), w)
     else:
-        r = int(np.ceil(radius_px))
-        rows = (int(round(center_px[0])) + np.arange(-r, r + 1)) % h
-        cols = (int(round(center_px[1])) + np.arange(-r, r + 1)) % w
-        window = surface[np.ix_(rows, cols)]
-        a, b = divmod(int(np.argmax(window)), window.shape[1])
-        i0, j0 = int(rows[a]), int(cols[b])
+        i0, j0 = _window_argmax(
+            surface, int(round(center_px[0])), int(round(center_px[1])), int(np.ceil(radius_px))
+        )
     height = float(surface[i0, j0])
-
-    patch = surface[np.ix_((i0 + np.arange(-1, 2)) % h, (j0 + np.arange(-1, 2)) % w)]
-    logp = np.log(np.maximum(patch.astype(np.float64), max(height, TINY) * LOG_FLOOR_FRACTION))
-    grad = np.array([logp[2, 1] - logp[0, 1], logp[1, 2] - logp[1, 0]]) * 0.5
-    hyy = logp[2, 1] - 2.0 * logp[1, 1] + logp[0, 1]
-    hxx = logp[1, 2] - 2.0 * logp[1, 1] + logp[1, 0]
-    hxy = 0.25 * (logp[2, 2] - logp[2, 0] - logp[0, 2] + logp[0, 0])
-    hessian = np.array([[hyy, hxy], [hxy, hxx]])
-    curvature = -hessian
-    if np.linalg.eigvalsh(curvature).min() > MIN_CURVATURE:
-        offset = np.linalg.solve(hessian, -grad)
-        offset = np.clip(offset, -1.0, 1.0)
-    else:  # degenerate neighbourhood: keep the integer peak
-        offset = np.zeros(2)
-
-    # Noise: spread of the surface away from the peak (a band of rows/cols is cheap to skip).
+    fit = _fit_log_quadratic(surface, i0, j0, max(height, TINY) * LOG_FLOOR_FRACTION)
+    curvature = np.array([[fit[2], fit[3]], [fit[3], fit[4]]])
     exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * smoothing_px)) + 1
-    keep_rows = np.ones(h, dtype=bool)
-    keep_rows[(i0 + np.arange(-exclude, exclude + 1)) % h] = False
-    noise = float(np.std(surface[keep_rows]))
+    noise = float(_std_outside_rows(surface, i0, exclude))
     quality = height / noise if noise > 0 else 0.0  # a flat surface carries no information
-
-    shift = np.array([i0, j0], dtype=np.float64) + offset
+    shift = np.array([i0 + fit[0], j0 + fit[1]], dtype=np.float64)
     shift = (shift + np.array([h, w]) / 2.0) % np.array([h, w]) - np.array([h, w]) / 2.0
     return Peak(shift_px=shift, height=height, quality=quality, curvature=curvature, noise=noise)
+
+
+@numba.njit(nogil=True, cache=True)
+def _window_argmax(surface, ci, cj, r):  # type: ignore[no-untyped-def]  # fmt: skip
+    """(row, col) of the largest value within Chebyshev distance r of (ci, cj), periodic;
+    the first in row-major window order on ties (as np.argmax of the window)."""
+    h, w = surface.shape
+    best_i = ci % h
+    best_j = cj % w
+    best = surface[best_i, best_j]
+    first = True
+    for a in range(-r, r + 1):
+        i = (ci + a) % h
+        for b in range(-r, r + 1):
+            j = (cj + b) % w
+            v = surface[i, j]
+            if first or v > best:
+                best, best_i, best_j, first = v, i, j, False
+    return best_i, best_j
+
+
+@numba.njit(nogil=True, cache=True)
+def _fit_log_quadratic(surface, i0, j0, floor):  # type: ignore[no-untyped-def]  # fmt: skip
+    """(d_row, d_col, c_rr, c_rc, c_cc): the sub-pixel offset (clipped to +-1) and the
+    curvature (negative Hessian) of a quadratic through the log of the 3 x 3 neighbourhood of
+    (i0, j0) (values floored at `floor`); a zero offset when the curvature is not positive
+    definite."""
+    h, w = surface.shape
+    logp = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            value = np.float64(surface[(i0 + a - 1) % h, (j0 + b - 1) % w])
+            logp[a, b] = math.log(max(value, floor))
+    g_r = 0.5 * (logp[2, 1] - logp[0, 1])
+    g_c = 0.5 * (logp[1, 2] - logp[1, 0])
+    h_rr = logp[2, 1] - 2.0 * logp[1, 1] + logp[0, 1]
+    h_cc = logp[1, 2] - 2.0 * logp[1, 1] + logp[1, 0]
+    h_rc = 0.25 * (logp[2, 2] - logp[2, 0] - logp[0, 2] + logp[0, 0])
+    c_rr, c_rc, c_cc = -h_rr, -h_rc, -h_cc
+    half_trace = 0.5 * (c_rr + c_cc)
+    min_eig = half_trace - math.sqrt((0.5 * (c_rr - c_cc)) ** 2 + c_rc * c_rc)
+    d_r = 0.0
+    d_c = 0.0
+    if min_eig > MIN_CURVATURE:  # solve C d = g (the Newton step on the log surface)
+        det = c_rr * c_cc - c_rc * c_rc
+        d_r = min(max((c_cc * g_r - c_rc * g_c) / det, -1.0), 1.0)
+        d_c = min(max((c_rr * g_c - c_rc * g_r) / det, -1.0), 1.0)
+    return d_r, d_c, c_rr, c_rc, c_cc
+
+
+@numba.njit(nogil=True, cache=True, fastmath={"reassoc", "contract"})  # vectorised sums
+def _std_outside_rows(surface, i0, exclude):  # type: ignore[no-untyped-def]  # fmt: skip
+    """Standard deviation (float64) of the surface without the rows within `exclude` of row i0
+    (periodic); 0 when nothing is left."""
+    h, w = surface.shape
+    total = 0.0
+    total_sq = 0.0
+    count = 0
+    for i in range(h):
+        d = (i - i0) % h
+        if d <= exclude or d >= h - exclude:
+            continue
+        for j in range(w):
+            v = np.float64(surface[i, j])
+            total += v
+            total_sq += v * v
+        count += w
+    if count == 0:
+        return 0.0
+    mean = total / count
+    return math.sqrt(max(total_sq / count - mean * mean, 0.0))
 
 
 @dataclass(frozen=True)
@@ -196,7 +317,38 @@ def correlate_1d(
     Each element of the cross-power spectrum is whitened, the rows are summed, the zero
     frequency is dropped (it carries no shift), and a Gaussian of `smoothing` samples shapes the
     peak. Returns the (n,) periodic correlation; it peaks at d when mov(t) = ref(t - d).
+    The whitened sum is one compiled pass (`_summed_cross_power`, float32 products summed in
+    float64).
     """
+    width = s_ref.shape[-1]
+    ref2 = s_ref.reshape(-1, width)
+    summed = np.empty(width, dtype=np.complex128)
+    _summed_cross_power(ref2, s_mov.reshape(-1, width), summed)
+    summed[0] = 0.0
+    freq = np.fft.rfftfreq(n)
+    summed *= np.exp(-2.0 * (np.pi * smoothing * freq) ** 2)
+    return np.fft.irfft(summed, n=n) / max(1, ref2.shape[0])
+
+
+@numba.njit(nogil=True, cache=True)
+def _summed_cross_power(s_ref, s_mov, out):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out[k] = sum over rows of C / (|C| + eps), C = mov * conj(ref) (complex64 products)."""
+    eps = np.float32(SPECTRUM_EPS)
+    out[:] = 0.0
+    for i in range(s_ref.shape[0]):
+        for k in range(s_ref.shape[1]):
+            m = s_mov[i, k]
+            r = s_ref[i, k]
+            c_re = m.real * r.real + m.imag * r.imag
+            c_im = m.imag * r.real - m.real * r.imag
+            inverse = np.float32(1.0) / (np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + eps)
+            out[k] += complex(c_re * inverse, c_im * inverse)
+
+
+def correlate_1d_reference(
+    s_ref: NDArray[np.complex64], s_mov: NDArray[np.complex64], n: int, smoothing: float
+) -> NDArray[np.float64]:
+    """`correlate_1d` in plain numpy operations (the reference its kernel is tested against)."""
     cross = s_mov * np.conj(s_ref)
     cross /= np.abs(cross) + np.float32(SPECTRUM_EPS)
     summed = cross.reshape(-1, cross.shape[-1]).sum(axis=0)

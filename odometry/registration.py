@@ -198,17 +198,6 @@ def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) ->
     return PreparedScan(polar, twist if cfg.deskew.enabled else None, cfg)
 
 
-@functools.lru_cache(maxsize=4)
-def _half_turn_ramp(size_px: int) -> NDArray[np.complex64]:
-    """exp(2 pi i (k_r + k_c) / n) on the half spectrum: the spectrum of a pi-turned image is
-    this times the conjugate spectrum (the grid is centred between pixels)."""
-    k_r = np.fft.fftfreq(size_px)[:, None]
-    k_c = np.fft.rfftfreq(size_px)[None, :]
-    ramp = np.exp(2j * np.pi * (k_r + k_c)).astype(np.complex64)
-    ramp.setflags(write=False)
-    return ramp
-
-
 def _peak_to_metres(peak: Peak, cell_m: float) -> FloatArray:
     """Translation (x, y) [m] of the moved scan's sensor from a peak of correlate(ref, moved).
 
@@ -324,9 +313,8 @@ def _coarse_translation(
     radius = None if hint_xy is None else tcfg.hint_radius_m / level.cell_m
     hypotheses = []
     for turn in turns:
-        candidate = spectrum if turn == 0.0 else _half_turn_ramp(shape[0]) * np.conj(spectrum)
         surface = correlate(
-            ref.coarse_spectrum, candidate, shape, tcfg.smoothing_px, tcfg.whitening
+            ref.coarse_spectrum, spectrum, shape, tcfg.smoothing_px, tcfg.whitening, turn != 0.0
         )
         hypotheses.append((locate_peak(surface, tcfg.smoothing_px, centre, radius), turn))
     peak, turn = max(hypotheses, key=lambda h: h[0].quality)

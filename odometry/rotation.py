@@ -15,9 +15,12 @@ current motion estimate; the remaining rotation is then a pure shift along the a
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -69,11 +72,12 @@ def signature(spectrum: HalfSpectrum, cfg: RotationConfig) -> Signature:
     """Rotation signature of an image from its half spectrum (size_px, size_px // 2 + 1).
 
     Returns (n_radii, n_angles // 2 + 1) complex64: the angular spectrum of the polar-resampled
-    log magnitude spectrum.
+    log magnitude spectrum (its zero frequency, which the angular correlation ignores, is not
+    meaningful).
     """
     size = spectrum.shape[0]
-    magnitude = np.log1p(np.abs(spectrum))
-    centred = np.fft.fftshift(magnitude, axes=0).astype(np.float32)
+    centred = np.empty(spectrum.shape, dtype=np.float32)
+    _centred_log_magnitude(spectrum, centred)
     sampler = _sampler(size, cfg)
     polar = cv2.remap(
         centred,
@@ -82,8 +86,29 @@ def signature(spectrum: HalfSpectrum, cfg: RotationConfig) -> Signature:
         interpolation=cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REPLICATE,
     )
-    polar -= polar.mean(axis=1, keepdims=True)
-    return np.fft.rfft(polar, axis=1).astype(np.complex64)
+    return rows_spectrum(np.asarray(polar, dtype=np.float32))
+
+
+@numba.njit(nogil=True, cache=True)
+def _centred_log_magnitude(spectrum, out):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out = log(1 + |spectrum|) with the rows shifted by half (numpy's fftshift along axis 0),
+    float32 (log1p is several times slower and no more accurate for magnitudes far above 1)."""
+    h = spectrum.shape[0]
+    shift = h // 2
+    for i in range(h):
+        row = (i + shift) % h
+        for j in range(spectrum.shape[1]):
+            v = spectrum[i, j]
+            magnitude = np.float32(math.sqrt(v.real * v.real + v.imag * v.imag))
+            out[row, j] = math.log(np.float32(1.0) + magnitude)
+
+
+def rows_spectrum(image: NDArray[np.float32]) -> NDArray[np.complex64]:
+    """(rows, cols // 2 + 1) complex64 view of the real spectra of the rows of `image`
+    (rows, cols) float32 (OpenCV's row DFT; numpy's `rfft(image, axis=1)` to float32
+    precision)."""
+    full = cv2.dft(np.ascontiguousarray(image), flags=cv2.DFT_ROWS | cv2.DFT_COMPLEX_OUTPUT)
+    return cast(NDArray[np.complex64], full.view(np.complex64)[:, : image.shape[1] // 2 + 1, 0])
 
 
 def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationConfig) -> RotationEstimate:
@@ -150,7 +175,7 @@ def polar_grid(cfg: RotationConfig) -> PolarGrid:
 def angular_spectrum(image: NDArray[np.float32]) -> NDArray[np.complex64]:
     """(n_ranges, n_angles // 2 + 1) complex64 spectra along the angle axis of a scan sampled
     on a `PolarGrid` ((n_angles, n_ranges) float32), one per range."""
-    return np.fft.rfft(image.T, axis=1).astype(np.complex64)
+    return rows_spectrum(np.asarray(cv2.transpose(image), dtype=np.float32))
 
 
 def refine_rotation(

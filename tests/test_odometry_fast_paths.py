@@ -1,8 +1,10 @@
-"""The odometry's fast paths equal the straightforward computations they replace, bit for bit.
+"""The odometry's fast paths equal the straightforward computations they replace.
 
-The compiled sampling-map kernel against its vectorised numpy reference, the uint16 block mean
-against OpenCV's area resize, the per-scan caches (wrapped polar image, refinement spectrum)
-against fresh computations.
+Bit for bit: the compiled sampling-map kernel against its vectorised numpy reference, the uint16
+block mean against OpenCV's area resize, the per-scan caches (wrapped polar image, refinement
+spectrum) against fresh computations. To float32 precision (the compiled kernels round
+differently from numpy's SIMD loops): the cross-power spectra of the 2-D and 1-D phase
+correlations, the peak statistics, the row spectra and the Fourier-Mellin log magnitude.
 """
 
 from __future__ import annotations
@@ -14,7 +16,15 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
 from odometry.deskew import _MapConstants, _sampling_maps_numpy, sampling_maps
-from odometry.phase_correlation import forward
+from odometry.phase_correlation import (
+    PEAK_EXCLUSION_SIGMAS,
+    correlate,
+    correlate_1d,
+    correlate_1d_reference,
+    correlate_reference,
+    forward,
+    locate_peak,
+)
 from odometry.preprocess import (
     _ring_level,
     block_mean,
@@ -25,7 +35,13 @@ from odometry.preprocess import (
     render_cartesian,
 )
 from odometry.registration import PreparedScan, _residual_rotation
-from odometry.rotation import angular_spectrum, polar_grid, refine_rotation
+from odometry.rotation import (
+    _centred_log_magnitude,
+    angular_spectrum,
+    polar_grid,
+    refine_rotation,
+    rows_spectrum,
+)
 from raplace.warp import remap, remap_wrapped, wrap_rows
 
 N_AZ = 400
@@ -151,3 +167,80 @@ def test_ring_median_from_counts_equals_float_partition() -> None:
         expected = np.partition(image, N_AZ // 2, axis=0)[N_AZ // 2]
         np.testing.assert_array_equal(_ring_level(image, sums, factor), expected)
         np.testing.assert_array_equal(_ring_level(image, None, factor), expected)
+
+
+def _relative_error(actual: np.ndarray, expected: np.ndarray) -> float:
+    return float(np.abs(actual - expected).max() / np.abs(expected).max())
+
+
+def _shifted_pair(size: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    image = cv2.GaussianBlur(rng.random((size, size), dtype=np.float32), (0, 0), 1.5)
+    return image, np.roll(image, (int(rng.integers(-20, 20)), int(rng.integers(-20, 20))), (0, 1))
+
+
+@pytest.mark.parametrize("half_turn", [False, True])
+@pytest.mark.parametrize("whitening", [1.0, 0.5, 0.0])
+def test_cross_power_kernel_equals_numpy_reference(half_turn: bool, whitening: float) -> None:
+    ref, moved = _shifted_pair(96, seed=int(10 * whitening) + half_turn)
+    args = (forward(ref), forward(moved), ref.shape, 1.3, whitening, half_turn)
+    surface = correlate(*args)
+    expected = correlate_reference(*args)
+    assert surface.dtype == np.float32 and surface.shape == ref.shape
+    assert _relative_error(surface, expected) < 1e-6
+    assert np.argmax(surface) == np.argmax(expected)
+
+
+def test_summed_angular_correlation_equals_numpy_reference() -> None:
+    rng = np.random.default_rng(4)
+    polar = rng.random((40, 180), dtype=np.float32)
+    turned = np.roll(polar, 7, axis=1) + rng.normal(0, 0.1, polar.shape).astype(np.float32)
+    s_ref, s_mov = rows_spectrum(polar), rows_spectrum(turned)
+    np.testing.assert_allclose(s_ref, np.fft.rfft(polar, axis=1), rtol=0, atol=1e-4)
+    curve = correlate_1d(s_ref, s_mov, 180, 1.0)
+    expected = correlate_1d_reference(s_ref, s_mov, 180, 1.0)
+    assert _relative_error(curve, expected) < 1e-6
+    assert int(np.argmax(curve)) == 7
+
+
+def test_peak_statistics_equal_numpy_formulas() -> None:
+    ref, moved = _shifted_pair(128, seed=8)
+    surface = correlate(forward(ref), forward(moved), ref.shape, 1.0)
+    h, w = surface.shape
+    rng = np.random.default_rng(9)
+    exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * 1.0)) + 1
+    for centre in [None, (3.2, -7.9), (-63.0, 62.6), *rng.uniform(-64, 64, (5, 2))]:
+        peak = locate_peak(surface, 1.0, None if centre is None else tuple(centre), 6.0)
+        i0, j0 = (int(round(v)) % n for v, n in zip(peak.shift_px, (h, w), strict=True))
+        if centre is None:
+            assert surface[i0, j0] == surface.max()
+        else:  # the window's maximum (np.argmax order on ties)
+            rows = (int(round(centre[0])) + np.arange(-6, 7)) % h
+            cols = (int(round(centre[1])) + np.arange(-6, 7)) % w
+            window = surface[np.ix_(rows, cols)]
+            a, b = divmod(int(np.argmax(window)), window.shape[1])
+            assert peak.height == float(window[a, b])
+            i0, j0 = int(rows[a]), int(cols[b])
+        keep = np.ones(h, dtype=bool)
+        keep[(i0 + np.arange(-exclude, exclude + 1)) % h] = False
+        assert peak.noise == pytest.approx(float(np.std(surface[keep])), rel=1e-5)
+        patch = surface[np.ix_((i0 + np.arange(-1, 2)) % h, (j0 + np.arange(-1, 2)) % w)]
+        logp = np.log(np.maximum(patch.astype(np.float64), max(peak.height, 1e-30) * 1e-3))
+        hyy = logp[2, 1] - 2.0 * logp[1, 1] + logp[0, 1]
+        hxx = logp[1, 2] - 2.0 * logp[1, 1] + logp[1, 0]
+        hxy = 0.25 * (logp[2, 2] - logp[2, 0] - logp[0, 2] + logp[0, 0])
+        np.testing.assert_allclose(peak.curvature, -np.array([[hyy, hxy], [hxy, hxx]]), atol=1e-9)
+        grad = 0.5 * np.array([logp[2, 1] - logp[0, 1], logp[1, 2] - logp[1, 0]])
+        if np.linalg.eigvalsh(peak.curvature).min() > 1e-6:
+            offset = np.clip(np.linalg.solve(peak.curvature, grad), -1.0, 1.0)
+            wrapped = (np.array([i0, j0]) + offset + [h / 2, w / 2]) % [h, w] - [h / 2, w / 2]
+            np.testing.assert_allclose(peak.shift_px, wrapped, atol=1e-9)
+
+
+def test_centred_log_magnitude_equals_numpy() -> None:
+    ref, _ = _shifted_pair(64, seed=12)
+    spectrum = forward(ref)
+    out = np.empty(spectrum.shape, np.float32)
+    _centred_log_magnitude(spectrum, out)
+    expected = np.fft.fftshift(np.log1p(np.abs(spectrum)), axes=0)
+    np.testing.assert_allclose(out, expected, rtol=1e-6, atol=1e-6)

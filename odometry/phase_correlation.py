@@ -1,6 +1,7 @@
 """2-D phase correlation with a smooth, sub-pixel-locatable peak and a peak quality measure.
 
-Spectra are half spectra (`numpy.fft.rfft2` layout, (H, W // 2 + 1) complex64). The normalised
+Spectra are packed real spectra (`odometry.packed`: OpenCV's CCS layout, (H, W) float32, H and W
+even), made by `forward`. The normalised
 cross-power spectrum is multiplied by a Gaussian low-pass, which convolves the correlation surface
 with a Gaussian of `smoothing_px`: the peak of a pure shift becomes a sampled Gaussian, and a
 quadratic fit of the log surface on its 3 x 3 neighbourhood then locates it to a small fraction of
@@ -15,15 +16,16 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import cast
 
-import cv2
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from odometry.packed import PackedSpectrum, forward, inverse, pack, unpack
+
+__all__ = ["PackedSpectrum", "correlate", "forward", "locate_peak"]
+
 FloatImage = NDArray[np.float32]
-HalfSpectrum = NDArray[np.complex64]
 SPECTRUM_EPS = 1e-12
 """Added to spectral magnitudes before whitening (avoids 0 / 0 on empty frequencies)."""
 TINY = 1e-30
@@ -76,12 +78,6 @@ def _safe_inverse(matrix: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.asarray(np.linalg.inv(matrix), dtype=np.float64)
 
 
-def forward(image: FloatImage) -> HalfSpectrum:
-    """Half spectrum (H, W // 2 + 1) complex64 of a real float32 image (cv2's fast DFT)."""
-    full = cv2.dft(np.ascontiguousarray(image, dtype=np.float32), flags=cv2.DFT_COMPLEX_OUTPUT)
-    return full.view(np.complex64)[:, : image.shape[1] // 2 + 1, 0]
-
-
 @functools.lru_cache(maxsize=16)
 def gaussian_lowpass(shape: tuple[int, int], sigma_px: float) -> NDArray[np.float32]:
     """Half-spectrum weights that convolve a surface of `shape` with a Gaussian of `sigma_px`."""
@@ -90,6 +86,16 @@ def gaussian_lowpass(shape: tuple[int, int], sigma_px: float) -> NDArray[np.floa
     weights = np.exp(-2.0 * (np.pi * sigma_px) ** 2 * (fy * fy + fx * fx)).astype(np.float32)
     weights.setflags(write=False)  # shared through the cache
     return weights
+
+
+@functools.lru_cache(maxsize=16)
+def _packed_lowpass(shape: tuple[int, int], sigma_px: float) -> PackedSpectrum:
+    """`gaussian_lowpass` at every packed position (both of a pair), times 1 / (H W) (the
+    scale of the unscaled inverse DFT)."""
+    weights = gaussian_lowpass(shape, sigma_px).astype(np.float64) / (shape[0] * shape[1])
+    packed = pack(weights + 1j * weights)
+    packed.setflags(write=False)
+    return packed
 
 
 @functools.lru_cache(maxsize=4)
@@ -104,18 +110,25 @@ def half_turn_ramp(size_px: int) -> NDArray[np.complex64]:
     return ramp
 
 
+@functools.lru_cache(maxsize=4)
+def _packed_half_turn_ramp(size_px: int) -> PackedSpectrum:
+    packed = pack(half_turn_ramp(size_px))  # +-1 at the four real positions
+    packed.setflags(write=False)
+    return packed
+
+
 def correlate(
-    f_ref: HalfSpectrum,
-    f_mov: HalfSpectrum,
+    f_ref: PackedSpectrum,
+    f_mov: PackedSpectrum,
     shape: tuple[int, int],
     smoothing_px: float,
     whitening: float = 1.0,
     half_turn: bool = False,
 ) -> FloatImage:
-    """Phase-correlation surface (H, W) float32 of two half spectra of images of `shape`.
+    """Phase-correlation surface (H, W) float32 of two packed spectra of images of `shape`.
 
     Args:
-        f_ref, f_mov: half spectra of the reference and moved images.
+        f_ref, f_mov: packed spectra (`forward`) of the reference and moved images.
         shape: (H, W) of the images.
         smoothing_px: Gaussian width of the peak [pixels].
         whitening: exponent of the magnitude normalisation (1: phase only; 0: plain
@@ -123,56 +136,71 @@ def correlate(
         half_turn: correlate with the moved image turned by pi (square images only; its
             spectrum is `half_turn_ramp` times the conjugate of `f_mov`).
 
-    The cross-power spectrum is made in one compiled pass (`_cross_power_kernel`, float64
-    arithmetic, no temporaries); `correlate_reference` is the same in numpy operations.
+    The cross-power spectrum is made in one compiled pass over the packed spectra
+    (`_cross_power_kernel`); `correlate_reference` is the same in numpy operations.
     """
-    weights = gaussian_lowpass(shape, float(smoothing_px))
-    ramp = half_turn_ramp(shape[0]) if half_turn else _NO_RAMP
-    cross = np.empty(weights.shape, dtype=np.complex64)
+    weights = _packed_lowpass(shape, float(smoothing_px))
+    ramp = _packed_half_turn_ramp(shape[0]) if half_turn else weights
+    cross = np.empty(shape, dtype=np.float32)
     _cross_power_kernel(f_ref, f_mov, weights, ramp, half_turn, float(whitening), cross)
-    return cast(FloatImage, np.fft.irfft2(cross, s=shape))  # float32 from complex64
+    return inverse(cross)
 
 
-_NO_RAMP = np.zeros((1, 1), dtype=np.complex64)
+@numba.njit(nogil=True, cache=True, inline="always")
+def _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i1, j1, i2, j2):  # type: ignore[no-untyped-def]  # fmt: skip
+    """One frequency of `_cross_power_kernel`: the (Re, Im) pair at (i1, j1), (i2, j2), or a
+    real value when both positions are the same."""
+    paired = i1 != i2 or j1 != j2
+    m_re = mov[i1, j1]
+    m_im = mov[i2, j2] if paired else np.float32(0.0)
+    if half_turn:  # ramp * conj(mov)
+        p_re = ramp[i1, j1]
+        p_im = ramp[i2, j2] if paired else np.float32(0.0)
+        m_re, m_im = p_re * m_re + p_im * m_im, p_im * m_re - p_re * m_im
+    r_re = ref[i1, j1]
+    r_im = ref[i2, j2] if paired else np.float32(0.0)
+    c_re = m_re * r_re + m_im * r_im
+    c_im = m_im * r_re - m_re * r_im
+    scale = weights[i1, j1]
+    if whitening > 0.0:
+        magnitude = np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + np.float32(SPECTRUM_EPS)
+        if whitening != 1.0:
+            magnitude = np.float32(magnitude**whitening)
+        scale = scale / magnitude
+    out[i1, j1] = c_re * scale
+    if paired:
+        out[i2, j2] = c_im * scale
 
 
 @numba.njit(nogil=True, cache=True)
-def _cross_power_kernel(f_ref, f_mov, weights, ramp, half_turn, whitening, out):  # type: ignore[no-untyped-def]  # fmt: skip
+def _cross_power_kernel(ref, mov, weights, ramp, half_turn, whitening, out):  # type: ignore[no-untyped-def]  # fmt: skip
     """out = weights * C / (|C| + eps) ** whitening with C = mov * conj(ref) (mov replaced by
-    ramp * conj(mov) for a half turn), element by element in float32 like numpy's complex64."""
-    eps = np.float32(SPECTRUM_EPS)
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            m = f_mov[i, j]
-            m_re = m.real
-            m_im = m.imag
-            if half_turn:
-                p = ramp[i, j]
-                m_re, m_im = p.real * m_re + p.imag * m_im, p.imag * m_re - p.real * m_im
-            r = f_ref[i, j]
-            c_re = m_re * r.real + m_im * r.imag
-            c_im = m_im * r.real - m_re * r.imag
-            scale = weights[i, j]
-            if whitening > 0.0:
-                magnitude = np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + eps
-                if whitening != 1.0:
-                    magnitude = np.float32(magnitude**whitening)
-                scale = scale / magnitude
-            out[i, j] = complex(c_re * scale, c_im * scale)
+    ramp * conj(mov) for a half turn), on packed spectra, in float32 like numpy's complex64."""
+    h, w = out.shape
+    for i in range(h):
+        for j in range(1, w - 1, 2):
+            _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i, j, i, j + 1)
+    for j in (0, w - 1):
+        for i in (0, h - 1):
+            _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i, j, i, j)
+        for i in range(1, h - 1, 2):
+            _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i, j, i + 1, j)
 
 
 def correlate_reference(
-    f_ref: HalfSpectrum,
-    f_mov: HalfSpectrum,
+    f_ref: PackedSpectrum,
+    f_mov: PackedSpectrum,
     shape: tuple[int, int],
     smoothing_px: float,
     whitening: float = 1.0,
     half_turn: bool = False,
 ) -> FloatImage:
-    """`correlate` in plain numpy operations (the reference its kernel is tested against)."""
+    """`correlate` in plain numpy operations on half spectra (the reference its kernel is
+    tested against)."""
+    h_ref, h_mov = unpack(f_ref), unpack(f_mov)
     if half_turn:
-        f_mov = half_turn_ramp(shape[0]) * np.conj(f_mov)
-    cross = f_mov * np.conj(f_ref)
+        h_mov = half_turn_ramp(shape[0]) * np.conj(h_mov)
+    cross = h_mov * np.conj(h_ref)
     if whitening > 0:
         magnitude = np.abs(cross) + np.float32(SPECTRUM_EPS)
         cross /= magnitude if whitening == 1.0 else magnitude**whitening

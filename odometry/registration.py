@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.phase_correlation import (
-    HalfSpectrum,
+    PackedSpectrum,
     Peak,
     correlate,
     forward,
@@ -118,7 +118,7 @@ class PreparedScan:
         image_pose: (3,) T_reference_image, the image frame in the reference frame under
             `twist` (zeros without a twist).
         empty: nothing is left after conditioning (the scan cannot be registered).
-        coarse_spectrum: half spectrum of the unrotated coarse image.
+        coarse_spectrum: packed spectrum (`odometry.packed`) of the unrotated coarse image.
         rotation_signature: Fourier-Mellin signature of the coarse image.
     """
 
@@ -159,8 +159,8 @@ class PreparedScan:
     # The spectra are made on first use: a scan re-rendered only to be registered again with a
     # hint (or never used as a reference) needs none of them.
     @functools.cached_property
-    def coarse_spectrum(self) -> HalfSpectrum:
-        """Half spectrum of the unrotated coarse image."""
+    def coarse_spectrum(self) -> PackedSpectrum:
+        """Packed spectrum of the unrotated coarse image."""
         return forward(self._render(cartesian_level(self.cfg.coarse), 0.0))
 
     @functools.cached_property
@@ -169,8 +169,8 @@ class PreparedScan:
         return signature(self.coarse_spectrum, self.cfg.rotation)
 
     @functools.cached_property
-    def fine_spectrum(self) -> HalfSpectrum:
-        """Half spectrum of the unrotated fine image (made when the scan is a reference)."""
+    def fine_spectrum(self) -> PackedSpectrum:
+        """Packed spectrum of the unrotated fine image (made when the scan is a reference)."""
         return forward(self._render(cartesian_level(self.cfg.fine), 0.0))
 
     @functools.cached_property

@@ -25,7 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import RotationConfig
-from odometry.phase_correlation import HalfSpectrum, correlate_1d, locate_peak_1d
+from odometry.packed import PackedSpectrum
+from odometry.phase_correlation import correlate_1d, locate_peak_1d
 
 Signature = NDArray[np.complex64]
 
@@ -68,15 +69,15 @@ def _sampler(size_px: int, cfg: RotationConfig) -> _PolarSampler:
     )
 
 
-def signature(spectrum: HalfSpectrum, cfg: RotationConfig) -> Signature:
-    """Rotation signature of an image from its half spectrum (size_px, size_px // 2 + 1).
+def signature(spectrum: PackedSpectrum, cfg: RotationConfig) -> Signature:
+    """Rotation signature of an image from its packed spectrum (size_px, size_px).
 
     Returns (n_radii, n_angles // 2 + 1) complex64: the angular spectrum of the polar-resampled
     log magnitude spectrum (its zero frequency, which the angular correlation ignores, is not
     meaningful).
     """
     size = spectrum.shape[0]
-    centred = np.empty(spectrum.shape, dtype=np.float32)
+    centred = np.empty((size, size // 2 + 1), dtype=np.float32)
     _centred_log_magnitude(spectrum, centred)
     sampler = _sampler(size, cfg)
     polar = cv2.remap(
@@ -90,17 +91,28 @@ def signature(spectrum: HalfSpectrum, cfg: RotationConfig) -> Signature:
 
 
 @numba.njit(nogil=True, cache=True)
-def _centred_log_magnitude(spectrum, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out = log(1 + |spectrum|) with the rows shifted by half (numpy's fftshift along axis 0),
-    float32 (log1p is several times slower and no more accurate for magnitudes far above 1)."""
-    h = spectrum.shape[0]
-    shift = h // 2
+def _log_magnitude(re, im):  # type: ignore[no-untyped-def]  # fmt: skip
+    # log(1 + m): log1p is several times slower and no more accurate for magnitudes far above 1.
+    return math.log(np.float32(1.0) + np.float32(math.sqrt(re * re + im * im)))
+
+
+@numba.njit(nogil=True, cache=True)
+def _centred_log_magnitude(packed, out):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out (h, w // 2 + 1) = log(1 + |half spectrum|) of a packed spectrum (h, w), the rows
+    shifted by half (numpy's fftshift along axis 0), float32."""
+    h, w = packed.shape
+    half = h // 2
     for i in range(h):
-        row = (i + shift) % h
-        for j in range(spectrum.shape[1]):
-            v = spectrum[i, j]
-            magnitude = np.float32(math.sqrt(v.real * v.real + v.imag * v.imag))
-            out[row, j] = math.log(np.float32(1.0) + magnitude)
+        row = (i + half) % h
+        for k in range(1, w // 2):
+            out[row, k] = _log_magnitude(packed[i, 2 * k - 1], packed[i, 2 * k])
+    for col, k in ((0, 0), (w - 1, w // 2)):
+        out[half, k] = _log_magnitude(packed[0, col], np.float32(0.0))
+        out[0, k] = _log_magnitude(packed[h - 1, col], np.float32(0.0))
+        for r in range(1, half):  # row frequencies r and -r share the magnitude
+            value = _log_magnitude(packed[2 * r - 1, col], packed[2 * r, col])
+            out[r + half, k] = value
+            out[half - r, k] = value
 
 
 def rows_spectrum(image: NDArray[np.float32]) -> NDArray[np.complex64]:

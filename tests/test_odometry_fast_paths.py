@@ -16,6 +16,7 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
 from odometry.deskew import _MapConstants, _sampling_maps_numpy, sampling_maps
+from odometry.packed import inverse, pack, unpack
 from odometry.phase_correlation import (
     PEAK_EXCLUSION_SIGMAS,
     correlate,
@@ -239,8 +240,22 @@ def test_peak_statistics_equal_numpy_formulas() -> None:
 
 def test_centred_log_magnitude_equals_numpy() -> None:
     ref, _ = _shifted_pair(64, seed=12)
-    spectrum = forward(ref)
+    packed = forward(ref)
+    spectrum = unpack(packed)
     out = np.empty(spectrum.shape, np.float32)
-    _centred_log_magnitude(spectrum, out)
+    _centred_log_magnitude(packed, out)
     expected = np.fft.fftshift(np.log1p(np.abs(spectrum)), axes=0)
     np.testing.assert_allclose(out, expected, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape", [(4, 6), (64, 64), (96, 40)])
+def test_packed_spectrum_round_trips_through_numpy_layout(shape: tuple[int, int]) -> None:
+    image = np.random.default_rng(shape[0]).random(shape, dtype=np.float32)
+    packed = forward(image)
+    half = np.fft.rfft2(image.astype(np.float64))
+    assert packed.shape == shape and packed.dtype == np.float32
+    assert _relative_error(unpack(packed), half) < 1e-6
+    np.testing.assert_array_equal(pack(unpack(packed)), packed)
+    np.testing.assert_allclose(inverse(packed) / image.size, image, atol=1e-5)
+    with pytest.raises(ValueError, match="even"):
+        forward(np.zeros((5, 8), np.float32))

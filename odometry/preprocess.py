@@ -96,7 +96,19 @@ class PolarScan:
     @functools.cached_property
     def wrapped_image(self) -> FloatImage:
         """(n_azimuths + 1, n_bins) `image` with row 0 repeated at the end (`raplace.warp`'s
-        seam layout), made once per scan for its many renders."""
+        seam layout), made once per scan for its many renders; `preprocess_polar` makes the
+        image as the first rows of such an array, which is then used without a copy."""
+        base = self.image.base
+        n = self.n_azimuths
+        if (
+            isinstance(base, np.ndarray)
+            and base.shape == (n + 1, self.image.shape[1])
+            and base.dtype == np.float32
+            and base.flags.c_contiguous
+            and self.image.ctypes.data == base.ctypes.data
+            and np.array_equal(base[n], self.image[0])
+        ):
+            return base
         return wrap_rows(self.image)
 
 
@@ -250,12 +262,14 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
         if cfg.ring_noise_removal
         else np.zeros(source.shape[1], dtype=np.float32)
     )
-    image = np.empty(source.shape, dtype=np.float32)
+    wrapped = np.empty((source.shape[0] + 1, source.shape[1]), dtype=np.float32)
+    image = wrapped[:-1]  # the seam row is filled below (see `PolarScan.wrapped_image`)
     _condition_rows(source, scale, ring, near, float(cfg.noise_floor_sigmas), image)
     if cfg.gamma != 1.0:
         np.power(image, cfg.gamma, out=image)
+    wrapped[-1] = image[0]
     return PolarScan(
-        image=np.ascontiguousarray(image, dtype=np.float32),
+        image=image,
         first_azimuth_rad=first,
         azimuth_step_rad=step,
         bin_size_m=bin_size,

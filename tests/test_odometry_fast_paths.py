@@ -9,6 +9,8 @@ correlations, the peak statistics, the row spectra and the Fourier-Mellin log ma
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -122,6 +124,11 @@ def test_wrapped_polar_cache_equals_fresh_wrap_and_remap() -> None:
     polar = preprocess_polar(_blob_scan(1), PreprocessConfig(bin_size_m=0.2, max_range_m=80.0))
     np.testing.assert_array_equal(polar.wrapped_image, wrap_rows(polar.image))
     assert polar.wrapped_image is polar.wrapped_image  # made once
+    assert np.shares_memory(polar.wrapped_image, polar.image)  # preprocess made it: no copy
+    # An image that is not the head of such an array is wrapped afresh.
+    other = dataclasses.replace(polar, image=polar.image.copy())
+    np.testing.assert_array_equal(other.wrapped_image, polar.wrapped_image)
+    assert not np.shares_memory(other.wrapped_image, other.image)
     rng = np.random.default_rng(2)
     bins = rng.uniform(-2.0, polar.image.shape[1] + 2.0, (50, 60)).astype(np.float32)
     rows = rng.uniform(0.0, N_AZ, (50, 60)).astype(np.float32)

@@ -146,45 +146,50 @@ def correlate(
     return inverse(cross)
 
 
+@numba.njit(nogil=True, cache=True)
+def _cross_power_kernel(ref, mov, weights, ramp, half_turn, whitening, out):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out = weights * C / (|C| + eps) ** whitening with C = mov * conj(ref) (mov replaced by
+    ramp * conj(mov) for a half turn), on packed spectra, in float32 like numpy's complex64.
+
+    The (Re, Im) pairs lie along the rows in the inner columns and down the two edge columns
+    (their paired rows); the four remaining values are real.
+    """
+    h, w = out.shape
+    zero = np.float32(0.0)
+    for i in range(h):
+        for j in range(1, w - 1, 2):
+            out[i, j], out[i, j + 1] = _whitened_product(
+                mov[i, j], mov[i, j + 1], ref[i, j], ref[i, j + 1], ramp[i, j], ramp[i, j + 1],
+                half_turn, whitening, weights[i, j],
+            )  # fmt: skip
+    for j in (0, w - 1):
+        for i in range(1, h - 1, 2):
+            out[i, j], out[i + 1, j] = _whitened_product(
+                mov[i, j], mov[i + 1, j], ref[i, j], ref[i + 1, j], ramp[i, j], ramp[i + 1, j],
+                half_turn, whitening, weights[i, j],
+            )  # fmt: skip
+        for i in (0, h - 1):
+            out[i, j], _ = _whitened_product(
+                mov[i, j], zero, ref[i, j], zero, ramp[i, j], zero, half_turn, whitening,
+                weights[i, j],
+            )  # fmt: skip
+
+
 @numba.njit(nogil=True, cache=True, inline="always")
-def _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i1, j1, i2, j2):  # type: ignore[no-untyped-def]  # fmt: skip
-    """One frequency of `_cross_power_kernel`: the (Re, Im) pair at (i1, j1), (i2, j2), or a
-    real value when both positions are the same."""
-    paired = i1 != i2 or j1 != j2
-    m_re = mov[i1, j1]
-    m_im = mov[i2, j2] if paired else np.float32(0.0)
-    if half_turn:  # ramp * conj(mov)
-        p_re = ramp[i1, j1]
-        p_im = ramp[i2, j2] if paired else np.float32(0.0)
+def _whitened_product(m_re, m_im, r_re, r_im, p_re, p_im, half_turn, whitening, weight):  # type: ignore[no-untyped-def]  # fmt: skip
+    """weight * C / (|C| + eps) ** whitening, C = m conj(r) (m replaced by p conj(m) for a half
+    turn), as (Re, Im) float32."""
+    if half_turn:
         m_re, m_im = p_re * m_re + p_im * m_im, p_im * m_re - p_re * m_im
-    r_re = ref[i1, j1]
-    r_im = ref[i2, j2] if paired else np.float32(0.0)
     c_re = m_re * r_re + m_im * r_im
     c_im = m_im * r_re - m_re * r_im
-    scale = weights[i1, j1]
+    scale = weight
     if whitening > 0.0:
         magnitude = np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + np.float32(SPECTRUM_EPS)
         if whitening != 1.0:
             magnitude = np.float32(magnitude**whitening)
         scale = scale / magnitude
-    out[i1, j1] = c_re * scale
-    if paired:
-        out[i2, j2] = c_im * scale
-
-
-@numba.njit(nogil=True, cache=True)
-def _cross_power_kernel(ref, mov, weights, ramp, half_turn, whitening, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out = weights * C / (|C| + eps) ** whitening with C = mov * conj(ref) (mov replaced by
-    ramp * conj(mov) for a half turn), on packed spectra, in float32 like numpy's complex64."""
-    h, w = out.shape
-    for i in range(h):
-        for j in range(1, w - 1, 2):
-            _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i, j, i, j + 1)
-    for j in (0, w - 1):
-        for i in (0, h - 1):
-            _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i, j, i, j)
-        for i in range(1, h - 1, 2):
-            _cross_power_at(ref, mov, weights, ramp, half_turn, whitening, out, i, j, i + 1, j)
+    return c_re * scale, c_im * scale
 
 
 def correlate_reference(

@@ -139,9 +139,10 @@ def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationConfig) -> Ro
 
 @dataclass(frozen=True)
 class PolarGrid:
-    """Points on a polar grid about a sensor: row j at bearing j * 2 pi / n_angles (CCW from +x),
-    column k at range min_range_m + (k + 0.5) * range_step_m. Arrays (n_angles, n_ranges) float32
-    [m, rad]."""
+    """Points on a polar grid about a sensor: row k at range min_range_m + (k + 0.5) *
+    range_step_m, column j at bearing j * 2 pi / n_angles (CCW from +x). Arrays
+    (n_ranges, n_angles) float32 [m, rad] (the angle along the rows, where the row DFT of
+    `angular_spectrum` needs it)."""
 
     x_m: NDArray[np.float32]
     y_m: NDArray[np.float32]
@@ -150,7 +151,7 @@ class PolarGrid:
 
     @property
     def n_angles(self) -> int:
-        return int(self.x_m.shape[0])
+        return int(self.x_m.shape[1])
 
     def shifted(
         self, dx_m: float, dy_m: float
@@ -172,10 +173,10 @@ def polar_grid(cfg: RotationConfig) -> PolarGrid:
     ranges = cfg.refine_min_range_m + (np.arange(n_ranges) + 0.5) * cfg.refine_range_step_m
     bearings = np.arange(cfg.refine_n_angles) * (2.0 * np.pi / cfg.refine_n_angles)
     bearings = np.where(bearings >= np.pi, bearings - 2.0 * np.pi, bearings)
-    x = ranges[None, :] * np.cos(bearings)[:, None]
-    y = ranges[None, :] * np.sin(bearings)[:, None]
-    rng = np.broadcast_to(ranges[None, :], x.shape)
-    bear = np.broadcast_to(bearings[:, None], x.shape)
+    x = ranges[:, None] * np.cos(bearings)[None, :]
+    y = ranges[:, None] * np.sin(bearings)[None, :]
+    rng = np.broadcast_to(ranges[:, None], x.shape)
+    bear = np.broadcast_to(bearings[None, :], x.shape)
     return PolarGrid(
         x_m=x.astype(np.float32),
         y_m=y.astype(np.float32),
@@ -186,8 +187,8 @@ def polar_grid(cfg: RotationConfig) -> PolarGrid:
 
 def angular_spectrum(image: NDArray[np.float32]) -> NDArray[np.complex64]:
     """(n_ranges, n_angles // 2 + 1) complex64 spectra along the angle axis of a scan sampled
-    on a `PolarGrid` ((n_angles, n_ranges) float32), one per range."""
-    return rows_spectrum(np.asarray(cv2.transpose(image), dtype=np.float32))
+    on a `PolarGrid` ((n_ranges, n_angles) float32), one per range."""
+    return rows_spectrum(image)
 
 
 def refine_rotation(
@@ -196,8 +197,8 @@ def refine_rotation(
     """Residual rotation of `mov` relative to `ref`, both sampled on the same `PolarGrid`.
 
     Args:
-        ref: (n_angles, n_ranges) the reference scan on the grid.
-        mov: (n_angles, n_ranges) the moved scan on the grid, rendered through the current
+        ref: (n_ranges, n_angles) the reference scan on the grid.
+        mov: (n_ranges, n_angles) the moved scan on the grid, rendered through the current
             motion estimate (so only a residual rotation remains).
         cfg: rotation settings.
 
@@ -212,11 +213,11 @@ def refine_rotation_against(
 ) -> RotationEstimate:
     """`refine_rotation` with the reference given by its `angular_spectrum` (kept by a
     reference scan that many scans are registered against)."""
-    n = mov.shape[0]
+    n = mov.shape[1]
     curve = correlate_1d(ref_spectrum, angular_spectrum(mov), n, cfg.refine_smoothing_bins)
     peak = locate_peak_1d(curve, cfg.refine_smoothing_bins)
     step = 2.0 * np.pi / n
-    # mov(bearing) = ref(bearing - d): the moved content sits d rows further CCW, i.e. the
+    # mov(bearing) = ref(bearing - d): the moved content sits d columns further CCW, i.e. the
     # rendering turned it too far by d; the yaw needs -d.
     return RotationEstimate(
         angle_rad=float(-peak.shift * step),

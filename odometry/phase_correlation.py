@@ -396,16 +396,15 @@ def locate_peak_1d(curve: NDArray[np.float64], smoothing: float) -> Peak1D:
     n = len(curve)
     i0 = int(np.argmax(curve))
     height = float(curve[i0])
-    trio = curve[(i0 + np.arange(-1, 2)) % n].astype(np.float64)
-    logt = np.log(np.maximum(trio, max(height, TINY) * LOG_FLOOR_FRACTION))
+    floor = max(height, TINY) * LOG_FLOOR_FRACTION
+    logt = [math.log(max(float(curve[(i0 + k) % n]), floor)) for k in (-1, 0, 1)]
     second = logt[0] - 2.0 * logt[1] + logt[2]
     offset = 0.0
     if second < -MIN_CURVATURE:
-        offset = float(np.clip(0.5 * (logt[0] - logt[2]) / second, -1.0, 1.0))
+        offset = min(max(0.5 * (logt[0] - logt[2]) / second, -1.0), 1.0)
     exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * smoothing)) + 1
-    keep = np.ones(n, dtype=bool)
-    keep[(i0 + np.arange(-exclude, exclude + 1)) % n] = False
-    noise = float(np.std(curve[keep]))
+    # The samples as the rows of a one-column surface: the same noise as the 2-D peaks.
+    noise = float(_std_outside_rows(curve.reshape(-1, 1), i0, exclude))
     shift = (i0 + offset + n / 2.0) % n - n / 2.0
     return Peak1D(
         shift=shift,

@@ -124,7 +124,7 @@ class PreparedScan:
 
     def __init__(self, polar: PolarScan, twist: FloatArray | None, cfg: OdometryConfig) -> None:
         self.polar = polar
-        self.empty = not bool(np.any(polar.image > 0))
+        self.empty = not bool(polar.image.max() > 0)  # the image is non-negative
         self.twist = None if twist is None or polar.timing is None else np.asarray(twist, float)
         self.cfg = cfg
         mid = polar.mid_sweep_s

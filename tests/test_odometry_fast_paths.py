@@ -27,6 +27,7 @@ from odometry.phase_correlation import (
     correlate_reference,
     forward,
     locate_peak,
+    locate_peak_1d,
 )
 from odometry.preprocess import (
     _ring_level,
@@ -266,3 +267,21 @@ def test_packed_spectrum_round_trips_through_numpy_layout(shape: tuple[int, int]
     np.testing.assert_allclose(inverse(packed) / image.size, image, atol=1e-5)
     with pytest.raises(ValueError, match="even"):
         forward(np.zeros((5, 8), np.float32))
+
+
+def test_angular_peak_statistics_equal_numpy_formulas() -> None:
+    rng = np.random.default_rng(13)
+    curve = np.roll(np.exp(-0.5 * (np.arange(360) - 180.0) ** 2 / 1.5**2), 97)
+    curve = curve + rng.normal(0, 0.01, 360)
+    peak = locate_peak_1d(curve, 1.0)
+    i0 = int(np.argmax(curve))
+    exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * 1.0)) + 1
+    keep = np.ones(360, dtype=bool)
+    keep[(i0 + np.arange(-exclude, exclude + 1)) % 360] = False
+    assert peak.quality == pytest.approx(curve[i0] / np.std(curve[keep]), rel=1e-9)
+    logt = np.log(curve[(i0 + np.arange(-1, 2)) % 360])
+    second = logt[0] - 2.0 * logt[1] + logt[2]
+    assert peak.curvature == pytest.approx(-second, rel=1e-12)
+    expected = i0 + 0.5 * (logt[0] - logt[2]) / second
+    assert peak.shift == pytest.approx((expected + 180.0) % 360 - 180.0, abs=1e-9)
+    assert abs(peak.shift - (277 - 360)) < 0.1  # the true peak, wrapped to [-180, 180)

@@ -21,7 +21,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.packed import PackedSpectrum, forward, inverse, pack, unpack
+from odometry.packed import PackedSpectrum, forward, inverse, pack
 
 __all__ = ["PackedSpectrum", "correlate", "forward", "locate_peak"]
 
@@ -137,7 +137,7 @@ def correlate(
             spectrum is `half_turn_ramp` times the conjugate of `f_mov`).
 
     The cross-power spectrum is made in one compiled pass over the packed spectra
-    (`_cross_power_kernel`); `correlate_reference` is the same in numpy operations.
+    (`_cross_power_kernel`).
     """
     weights = _packed_lowpass(shape, float(smoothing_px))
     ramp = _packed_half_turn_ramp(shape[0]) if half_turn else weights
@@ -190,27 +190,6 @@ def _whitened_product(m_re, m_im, r_re, r_im, p_re, p_im, half_turn, whitening, 
             magnitude = np.float32(magnitude**whitening)
         scale = scale / magnitude
     return c_re * scale, c_im * scale
-
-
-def correlate_reference(
-    f_ref: PackedSpectrum,
-    f_mov: PackedSpectrum,
-    shape: tuple[int, int],
-    smoothing_px: float,
-    whitening: float = 1.0,
-    half_turn: bool = False,
-) -> FloatImage:
-    """`correlate` in plain numpy operations on half spectra (the reference its kernel is
-    tested against)."""
-    h_ref, h_mov = unpack(f_ref), unpack(f_mov)
-    if half_turn:
-        h_mov = half_turn_ramp(shape[0]) * np.conj(h_mov)
-    cross = h_mov * np.conj(h_ref)
-    if whitening > 0:
-        magnitude = np.abs(cross) + np.float32(SPECTRUM_EPS)
-        cross /= magnitude if whitening == 1.0 else magnitude**whitening
-    cross *= gaussian_lowpass(shape, float(smoothing_px))
-    return np.fft.irfft2(cross, s=shape).astype(np.float32, copy=False)
 
 
 def locate_peak(
@@ -376,19 +355,6 @@ def _summed_cross_power(s_ref, s_mov, out):  # type: ignore[no-untyped-def]  # f
             c_im = m.imag * r.real - m.real * r.imag
             inverse = np.float32(1.0) / (np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + eps)
             out[k] += complex(c_re * inverse, c_im * inverse)
-
-
-def correlate_1d_reference(
-    s_ref: NDArray[np.complex64], s_mov: NDArray[np.complex64], n: int, smoothing: float
-) -> NDArray[np.float64]:
-    """`correlate_1d` in plain numpy operations (the reference its kernel is tested against)."""
-    cross = s_mov * np.conj(s_ref)
-    cross /= np.abs(cross) + np.float32(SPECTRUM_EPS)
-    summed = cross.reshape(-1, cross.shape[-1]).sum(axis=0)
-    summed[0] = 0.0
-    freq = np.fft.rfftfreq(n)
-    summed *= np.exp(-2.0 * (np.pi * smoothing * freq) ** 2)
-    return np.fft.irfft(summed, n=n) / max(1, cross.size // cross.shape[-1])
 
 
 def locate_peak_1d(curve: NDArray[np.float64], smoothing: float) -> Peak1D:

@@ -72,10 +72,11 @@ class Peak:
 
 def _safe_inverse(matrix: NDArray[np.float64]) -> NDArray[np.float64]:
     """Inverse of a 2x2 curvature, falling back to a wide isotropic peak when not definite."""
-    eigvals = np.linalg.eigvalsh(matrix)
-    if eigvals.min() <= MIN_CURVATURE:
-        return np.eye(len(matrix)) * WIDE_PEAK_VARIANCE_PX2
-    return np.asarray(np.linalg.inv(matrix), dtype=np.float64)
+    (a, b), (_, c) = matrix
+    min_eigenvalue = 0.5 * (a + c) - math.hypot(0.5 * (a - c), b)
+    if not min_eigenvalue > MIN_CURVATURE:
+        return np.eye(2) * WIDE_PEAK_VARIANCE_PX2
+    return np.array([[c, -b], [-b, a]]) / (a * c - b * b)
 
 
 @functools.lru_cache(maxsize=16)
@@ -223,8 +224,7 @@ def locate_peak(
     exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * smoothing_px)) + 1
     noise = float(_std_outside_rows(surface, i0, exclude))
     quality = height / noise if noise > 0 else 0.0  # a flat surface carries no information
-    shift = np.array([i0 + fit[0], j0 + fit[1]], dtype=np.float64)
-    shift = (shift + np.array([h, w]) / 2.0) % np.array([h, w]) - np.array([h, w]) / 2.0
+    shift = np.array([(i0 + fit[0] + h / 2.0) % h - h / 2.0, (j0 + fit[1] + w / 2.0) % w - w / 2.0])
     return Peak(shift_px=shift, height=height, quality=quality, curvature=curvature, noise=noise)
 
 
@@ -337,9 +337,15 @@ def correlate_1d(
     summed = np.empty(width, dtype=np.complex128)
     _summed_cross_power(ref2, s_mov.reshape(-1, width), summed)
     summed[0] = 0.0
-    freq = np.fft.rfftfreq(n)
-    summed *= np.exp(-2.0 * (np.pi * smoothing * freq) ** 2)
+    summed *= _gaussian_lowpass_1d(n, float(smoothing))
     return np.fft.irfft(summed, n=n) / max(1, ref2.shape[0])
+
+
+@functools.lru_cache(maxsize=16)
+def _gaussian_lowpass_1d(n: int, smoothing: float) -> NDArray[np.float64]:
+    weights = np.exp(-2.0 * (np.pi * smoothing * np.fft.rfftfreq(n)) ** 2)
+    weights.setflags(write=False)  # shared through the cache
+    return weights
 
 
 @numba.njit(nogil=True, cache=True)

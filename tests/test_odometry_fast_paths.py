@@ -318,3 +318,15 @@ def test_angular_peak_statistics_equal_numpy_formulas() -> None:
     expected = i0 + 0.5 * (logt[0] - logt[2]) / second
     assert peak.shift == pytest.approx((expected + 180.0) % 360 - 180.0, abs=1e-9)
     assert abs(peak.shift - (277 - 360)) < 0.1  # the true peak, wrapped to [-180, 180)
+
+
+def test_peak_covariance_closed_form_equals_linalg() -> None:
+    ref, moved = _shifted_pair(64, seed=21)
+    peak = locate_peak(correlate(forward(ref), forward(moved), ref.shape, 1.0), 1.0)
+    assert np.linalg.eigvalsh(peak.curvature).min() > 1e-6
+    expected = np.linalg.inv(peak.curvature) / max(peak.quality, 1.0) ** 2
+    np.testing.assert_allclose(peak.covariance_px(), expected, rtol=1e-12)
+    flat = dataclasses.replace(peak, curvature=np.array([[1.0, 0.0], [0.0, -1.0]]))
+    np.testing.assert_array_equal(
+        flat.covariance_px(), np.eye(2) * 1e2 / max(peak.quality, 1.0) ** 2
+    )

@@ -66,3 +66,24 @@ def unpack(packed: PackedSpectrum) -> NDArray[np.complex64]:
         column[h // 2 + 1 :] = np.conj(column[1 : h // 2][::-1])  # Hermitian along the rows
         half[:, k] = column
     return half
+
+
+def forward_rows(image: NDArray[np.float32]) -> PackedSpectrum:
+    """Packed spectra (rows, n) float32 of every row of a real (rows, n) float32 image: per row
+    Re(0), then (Re, Im) pairs of the frequencies 1 .. (n - 1) // 2, then Re(n / 2) when n is
+    even (OpenCV's 1-D CCS layout)."""
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    return np.asarray(cv2.dft(image, flags=cv2.DFT_ROWS), dtype=np.float32)
+
+
+def unpack_rows(packed: PackedSpectrum) -> NDArray[np.complex64]:
+    """The half spectra (rows, n // 2 + 1) complex64 (`numpy.fft.rfft(axis=1)` layout) of
+    `forward_rows` spectra."""
+    n = packed.shape[1]
+    half = np.zeros((packed.shape[0], n // 2 + 1), dtype=np.complex64)
+    half[:, 0] = packed[:, 0]
+    pairs = (n - 1) // 2
+    half[:, 1 : pairs + 1] = packed[:, 1 : 2 * pairs : 2] + 1j * packed[:, 2 : 2 * pairs + 1 : 2]
+    if n % 2 == 0:
+        half[:, n // 2] = packed[:, n - 1]
+    return half

@@ -322,9 +322,9 @@ class Peak1D:
 
 
 def correlate_1d(
-    s_ref: NDArray[np.complex64], s_mov: NDArray[np.complex64], n: int, smoothing: float
+    s_ref: PackedSpectrum, s_mov: PackedSpectrum, n: int, smoothing: float
 ) -> NDArray[np.float64]:
-    """Summed phase correlation along the last axis of half spectra (..., n // 2 + 1).
+    """Summed phase correlation of row spectra (`odometry.packed.forward_rows`, (rows, n)).
 
     Each element of the cross-power spectrum is whitened, the rows are summed, the zero
     frequency is dropped (it carries no shift), and a Gaussian of `smoothing` samples shapes the
@@ -332,13 +332,11 @@ def correlate_1d(
     The whitened sum is one compiled pass (`_summed_cross_power`, float32 products summed in
     float64).
     """
-    width = s_ref.shape[-1]
-    ref2 = s_ref.reshape(-1, width)
-    summed = np.empty(width, dtype=np.complex128)
-    _summed_cross_power(ref2, s_mov.reshape(-1, width), summed)
-    summed[0] = 0.0
-    summed *= _gaussian_lowpass_1d(n, float(smoothing))
-    return np.fft.irfft(summed, n=n) / max(1, ref2.shape[0])
+    summed_re = np.zeros(n // 2 + 1)
+    summed_im = np.zeros(n // 2 + 1)
+    _summed_cross_power(s_ref, s_mov, summed_re, summed_im)
+    summed = (summed_re + 1j * summed_im) * _gaussian_lowpass_1d(n, float(smoothing))
+    return np.fft.irfft(summed, n=n) / max(1, s_ref.shape[0])
 
 
 @functools.lru_cache(maxsize=16)
@@ -349,18 +347,26 @@ def _gaussian_lowpass_1d(n: int, smoothing: float) -> NDArray[np.float64]:
 
 
 @numba.njit(nogil=True, cache=True)
-def _summed_cross_power(s_ref, s_mov, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out[k] = sum over rows of C / (|C| + eps), C = mov * conj(ref) (complex64 products)."""
+def _summed_cross_power(s_ref, s_mov, out_re, out_im):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out[k] += sum over rows of C / (|C| + eps), C = mov * conj(ref) (float32 products), for
+    the frequencies k >= 1 of packed row spectra (the zero frequency is left out)."""
     eps = np.float32(SPECTRUM_EPS)
-    out[:] = 0.0
+    n = s_ref.shape[1]
+    pairs = (n - 1) // 2
     for i in range(s_ref.shape[0]):
-        for k in range(s_ref.shape[1]):
-            m = s_mov[i, k]
-            r = s_ref[i, k]
-            c_re = m.real * r.real + m.imag * r.imag
-            c_im = m.imag * r.real - m.real * r.imag
+        for k in range(1, pairs + 1):
+            m_re = s_mov[i, 2 * k - 1]
+            m_im = s_mov[i, 2 * k]
+            r_re = s_ref[i, 2 * k - 1]
+            r_im = s_ref[i, 2 * k]
+            c_re = m_re * r_re + m_im * r_im
+            c_im = m_im * r_re - m_re * r_im
             inverse = np.float32(1.0) / (np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + eps)
-            out[k] += complex(c_re * inverse, c_im * inverse)
+            out_re[k] += c_re * inverse
+            out_im[k] += c_im * inverse
+        if n % 2 == 0:  # the real Nyquist value
+            c = s_mov[i, n - 1] * s_ref[i, n - 1]
+            out_re[n // 2] += c / (np.float32(abs(c)) + eps)
 
 
 def locate_peak_1d(curve: NDArray[np.float64], smoothing: float) -> Peak1D:

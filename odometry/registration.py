@@ -180,7 +180,7 @@ class PreparedScan:
         return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
 
     @functools.cached_property
-    def refine_spectrum(self) -> NDArray[np.complex64]:
+    def refine_spectrum(self) -> PackedSpectrum:
         """`angular_spectrum` of `refine_image` (made when the scan is a reference)."""
         return angular_spectrum(self.refine_image)
 

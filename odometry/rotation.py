@@ -17,7 +17,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import cast
 
 import cv2
 import numba
@@ -25,10 +24,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import RotationConfig
-from odometry.packed import PackedSpectrum
+from odometry.packed import PackedSpectrum, forward_rows
 from odometry.phase_correlation import correlate_1d, locate_peak_1d
 
-Signature = NDArray[np.complex64]
+Signature = PackedSpectrum
+"""Packed row spectra ((n_radii, n_angles) float32, `odometry.packed.forward_rows`)."""
 
 
 @dataclass(frozen=True)
@@ -72,9 +72,8 @@ def _sampler(size_px: int, cfg: RotationConfig) -> _PolarSampler:
 def signature(spectrum: PackedSpectrum, cfg: RotationConfig) -> Signature:
     """Rotation signature of an image from its packed spectrum (size_px, size_px).
 
-    Returns (n_radii, n_angles // 2 + 1) complex64: the angular spectrum of the polar-resampled
-    log magnitude spectrum (its zero frequency, which the angular correlation ignores, is not
-    meaningful).
+    Returns (n_radii, n_angles) float32: the packed angular spectra (`forward_rows`) of the
+    polar-resampled log magnitude spectrum.
     """
     size = spectrum.shape[0]
     centred = np.empty((size, size // 2 + 1), dtype=np.float32)
@@ -87,7 +86,7 @@ def signature(spectrum: PackedSpectrum, cfg: RotationConfig) -> Signature:
         interpolation=cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REPLICATE,
     )
-    return rows_spectrum(np.asarray(polar, dtype=np.float32))
+    return forward_rows(np.asarray(polar, dtype=np.float32))
 
 
 @numba.njit(nogil=True, cache=True)
@@ -113,14 +112,6 @@ def _centred_log_magnitude(packed, out):  # type: ignore[no-untyped-def]  # fmt:
             value = _log_magnitude(packed[2 * r - 1, col], packed[2 * r, col])
             out[r + half, k] = value
             out[half - r, k] = value
-
-
-def rows_spectrum(image: NDArray[np.float32]) -> NDArray[np.complex64]:
-    """(rows, cols // 2 + 1) complex64 view of the real spectra of the rows of `image`
-    (rows, cols) float32 (OpenCV's row DFT; numpy's `rfft(image, axis=1)` to float32
-    precision)."""
-    full = cv2.dft(np.ascontiguousarray(image), flags=cv2.DFT_ROWS | cv2.DFT_COMPLEX_OUTPUT)
-    return cast(NDArray[np.complex64], full.view(np.complex64)[:, : image.shape[1] // 2 + 1, 0])
 
 
 def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationConfig) -> RotationEstimate:
@@ -185,10 +176,10 @@ def polar_grid(cfg: RotationConfig) -> PolarGrid:
     )
 
 
-def angular_spectrum(image: NDArray[np.float32]) -> NDArray[np.complex64]:
-    """(n_ranges, n_angles // 2 + 1) complex64 spectra along the angle axis of a scan sampled
-    on a `PolarGrid` ((n_ranges, n_angles) float32), one per range."""
-    return rows_spectrum(image)
+def angular_spectrum(image: NDArray[np.float32]) -> PackedSpectrum:
+    """(n_ranges, n_angles) float32 packed spectra (`forward_rows`) along the angle axis of a
+    scan sampled on a `PolarGrid` ((n_ranges, n_angles) float32), one per range."""
+    return forward_rows(image)
 
 
 def refine_rotation(
@@ -209,7 +200,7 @@ def refine_rotation(
 
 
 def refine_rotation_against(
-    ref_spectrum: NDArray[np.complex64], mov: NDArray[np.float32], cfg: RotationConfig
+    ref_spectrum: PackedSpectrum, mov: NDArray[np.float32], cfg: RotationConfig
 ) -> RotationEstimate:
     """`refine_rotation` with the reference given by its `angular_spectrum` (kept by a
     reference scan that many scans are registered against)."""

@@ -18,7 +18,7 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
 from odometry.deskew import _MapConstants, _sampling_maps_numpy, sampling_maps
-from odometry.packed import inverse, pack, unpack
+from odometry.packed import forward_rows, inverse, pack, unpack, unpack_rows
 from odometry.phase_correlation import (
     PEAK_EXCLUSION_SIGMAS,
     SPECTRUM_EPS,
@@ -45,7 +45,6 @@ from odometry.rotation import (
     angular_spectrum,
     polar_grid,
     refine_rotation,
-    rows_spectrum,
 )
 from raplace.warp import remap, remap_wrapped, wrap_rows
 
@@ -237,10 +236,16 @@ def test_summed_angular_correlation_equals_numpy_reference() -> None:
     rng = np.random.default_rng(4)
     polar = rng.random((40, 180), dtype=np.float32)
     turned = np.roll(polar, 7, axis=1) + rng.normal(0, 0.1, polar.shape).astype(np.float32)
-    s_ref, s_mov = rows_spectrum(polar), rows_spectrum(turned)
-    np.testing.assert_allclose(s_ref, np.fft.rfft(polar, axis=1), rtol=0, atol=1e-4)
+    s_ref, s_mov = forward_rows(polar), forward_rows(turned)
+    np.testing.assert_allclose(unpack_rows(s_ref), np.fft.rfft(polar, axis=1), rtol=0, atol=1e-4)
+    odd = polar[:, :179]
+    np.testing.assert_allclose(unpack_rows(forward_rows(odd)), np.fft.rfft(odd, axis=1), atol=1e-4)
     curve = correlate_1d(s_ref, s_mov, 180, 1.0)
-    expected = _correlate_1d_numpy(s_ref, s_mov, 180, 1.0)
+    expected = _correlate_1d_numpy(unpack_rows(s_ref), unpack_rows(s_mov), 180, 1.0)
+    s_odd = forward_rows(turned[:, :179])
+    odd_curve = correlate_1d(forward_rows(odd), s_odd, 179, 1.0)
+    odd_expected = _correlate_1d_numpy(unpack_rows(forward_rows(odd)), unpack_rows(s_odd), 179, 1.0)
+    assert _relative_error(odd_curve, odd_expected) < 1e-6
     assert _relative_error(curve, expected) < 1e-6
     assert int(np.argmax(curve)) == 7
 

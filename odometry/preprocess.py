@@ -16,6 +16,7 @@ Two steps, both pure:
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -95,7 +96,19 @@ class PolarScan:
     @functools.cached_property
     def wrapped_image(self) -> FloatImage:
         """(n_azimuths + 1, n_bins) `image` with row 0 repeated at the end (`raplace.warp`'s
-        seam layout), made once per scan for its many renders."""
+        seam layout), made once per scan for its many renders; `preprocess_polar` makes the
+        image as the first rows of such an array, which is then used without a copy."""
+        base = self.image.base
+        n = self.n_azimuths
+        if (
+            isinstance(base, np.ndarray)
+            and base.shape == (n + 1, self.image.shape[1])
+            and base.dtype == np.float32
+            and base.flags.c_contiguous
+            and self.image.ctypes.data == base.ctypes.data
+            and np.array_equal(base[n], self.image[0])
+        ):
+            return base
         return wrap_rows(self.image)
 
 
@@ -189,7 +202,9 @@ def _row_timing(scan: Scan, source_rows: NDArray[np.float64]) -> RowTiming | Non
             f"azimuth_times_ns must have one entry per azimuth ({len(source_rows)}), got {t.shape}"
         )
     index = np.arange(len(t), dtype=np.float64)
-    period, first = np.polyfit(index, t, 1)
+    centred = index - index.mean()  # the straight line t = first + period * index, closed form
+    period = float(np.dot(centred, t - t.mean()) / np.dot(centred, centred))
+    first = float(t.mean() - period * index.mean())
     # Times of the uniform rows follow from where they were sampled in the source rows.
     first_uniform = first + period * source_rows[0]
     return RowTiming(first_row_s=float(first_uniform), row_period_s=float(period))
@@ -229,35 +244,66 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     if n_bins < factor:
         raise OdometryError(f"scan has {polar.shape[1]} bins: too few for max_range_m")
     sums = block_sums(polar[:, :n_bins], factor)
-    image = block_mean(polar[:, :n_bins], factor) if sums is None else _mean_of_sums(sums, factor)
+    # The exact uint16 sums feed the ring median and the conditioning kernel directly (their
+    # means are made there); otherwise the float means, resampled onto the uniform rows.
+    source: NDArray = sums if sums is not None else block_mean(polar[:, :n_bins], factor)
+    scale = np.float32(1.0 / factor) if sums is not None else np.float32(1.0)
     if not np.array_equal(source_rows, np.arange(len(source_rows))):
-        sums = None  # the rows are resampled below
+        image = source * scale if sums is not None else source
+        sums, source, scale = None, image, np.float32(1.0)  # the rows are resampled below
         rows = np.broadcast_to(source_rows.astype(np.float32)[:, None], image.shape)
         cols = np.broadcast_to(np.arange(image.shape[1], dtype=np.float32), image.shape)
-        image = remap(image, np.ascontiguousarray(cols), np.ascontiguousarray(rows))
+        source = remap(image, np.ascontiguousarray(cols), np.ascontiguousarray(rows))
     bin_size = factor * res
-    near = min(image.shape[1], int(np.ceil(cfg.min_range_m / bin_size)))
+    near = min(source.shape[1], int(np.ceil(cfg.min_range_m / bin_size)))
 
-    if cfg.ring_noise_removal:
-        image -= _ring_level(image, sums, factor)[None, :]
-    if cfg.noise_floor_sigmas >= 0:
-        body = image[:, near:]
-        floor = body.mean(axis=1)
-        if cfg.noise_floor_sigmas > 0:
-            floor += cfg.noise_floor_sigmas * body.std(axis=1)
-        image -= floor[:, None]
-    np.maximum(image, 0.0, out=image)
-    image[:, :near] = 0.0
+    ring = (
+        _ring_level(source, sums, factor)
+        if cfg.ring_noise_removal
+        else np.zeros(source.shape[1], dtype=np.float32)
+    )
+    wrapped = np.empty((source.shape[0] + 1, source.shape[1]), dtype=np.float32)
+    image = wrapped[:-1]  # the seam row is filled below (see `PolarScan.wrapped_image`)
+    _condition_rows(source, scale, ring, near, float(cfg.noise_floor_sigmas), image)
     if cfg.gamma != 1.0:
         np.power(image, cfg.gamma, out=image)
+    wrapped[-1] = image[0]
     return PolarScan(
-        image=np.ascontiguousarray(image, dtype=np.float32),
+        image=image,
         first_azimuth_rad=first,
         azimuth_step_rad=step,
         bin_size_m=bin_size,
         timestamp_ns=int(scan.timestamp_ns),
         timing=timing,
     )
+
+
+@numba.njit(nogil=True, cache=True, fastmath={"reassoc", "contract"})  # vectorised sums
+def _condition_rows(source, scale, ring, near, floor_sigmas, out):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out = source * scale - ring (n_bins,) per row, float32; then, when `floor_sigmas` >= 0,
+    minus each row's noise floor (mean + floor_sigmas standard deviations of its bins from
+    `near` on, accumulated in float64); clipped at 0, the bins before `near` zeroed."""
+    n_rows, n_bins = out.shape
+    count = n_bins - near
+    for i in range(n_rows):
+        for j in range(near):
+            out[i, j] = 0.0
+        total = 0.0
+        total_sq = 0.0
+        for j in range(near, n_bins):
+            value = np.float32(source[i, j] * scale) - ring[j]
+            out[i, j] = value
+            total += value
+            total_sq += np.float64(value) * value
+        floor = np.float32(0.0)
+        if floor_sigmas >= 0.0 and count > 0:
+            mean = total / count
+            level = mean
+            if floor_sigmas > 0.0:
+                level += floor_sigmas * math.sqrt(max(total_sq / count - mean * mean, 0.0))
+            floor = np.float32(level)
+        for j in range(near, n_bins):
+            out[i, j] = max(out[i, j] - floor, np.float32(0.0))
 
 
 def block_mean(polar: NDArray, factor: int) -> FloatImage:

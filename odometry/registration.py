@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.phase_correlation import (
-    HalfSpectrum,
+    PackedSpectrum,
     Peak,
     correlate,
     forward,
@@ -118,13 +118,13 @@ class PreparedScan:
         image_pose: (3,) T_reference_image, the image frame in the reference frame under
             `twist` (zeros without a twist).
         empty: nothing is left after conditioning (the scan cannot be registered).
-        coarse_spectrum: half spectrum of the unrotated coarse image.
+        coarse_spectrum: packed spectrum (`odometry.packed`) of the unrotated coarse image.
         rotation_signature: Fourier-Mellin signature of the coarse image.
     """
 
     def __init__(self, polar: PolarScan, twist: FloatArray | None, cfg: OdometryConfig) -> None:
         self.polar = polar
-        self.empty = not bool(np.any(polar.image > 0))
+        self.empty = not bool(polar.image.max() > 0)  # the image is non-negative
         self.twist = None if twist is None or polar.timing is None else np.asarray(twist, float)
         self.cfg = cfg
         mid = polar.mid_sweep_s
@@ -159,8 +159,8 @@ class PreparedScan:
     # The spectra are made on first use: a scan re-rendered only to be registered again with a
     # hint (or never used as a reference) needs none of them.
     @functools.cached_property
-    def coarse_spectrum(self) -> HalfSpectrum:
-        """Half spectrum of the unrotated coarse image."""
+    def coarse_spectrum(self) -> PackedSpectrum:
+        """Packed spectrum of the unrotated coarse image."""
         return forward(self._render(cartesian_level(self.cfg.coarse), 0.0))
 
     @functools.cached_property
@@ -169,8 +169,8 @@ class PreparedScan:
         return signature(self.coarse_spectrum, self.cfg.rotation)
 
     @functools.cached_property
-    def fine_spectrum(self) -> HalfSpectrum:
-        """Half spectrum of the unrotated fine image (made when the scan is a reference)."""
+    def fine_spectrum(self) -> PackedSpectrum:
+        """Packed spectrum of the unrotated fine image (made when the scan is a reference)."""
         return forward(self._render(cartesian_level(self.cfg.fine), 0.0))
 
     @functools.cached_property
@@ -180,7 +180,7 @@ class PreparedScan:
         return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
 
     @functools.cached_property
-    def refine_spectrum(self) -> NDArray[np.complex64]:
+    def refine_spectrum(self) -> PackedSpectrum:
         """`angular_spectrum` of `refine_image` (made when the scan is a reference)."""
         return angular_spectrum(self.refine_image)
 
@@ -196,17 +196,6 @@ def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) ->
     """
     polar = preprocess_polar(scan, cfg.preprocess)
     return PreparedScan(polar, twist if cfg.deskew.enabled else None, cfg)
-
-
-@functools.lru_cache(maxsize=4)
-def _half_turn_ramp(size_px: int) -> NDArray[np.complex64]:
-    """exp(2 pi i (k_r + k_c) / n) on the half spectrum: the spectrum of a pi-turned image is
-    this times the conjugate spectrum (the grid is centred between pixels)."""
-    k_r = np.fft.fftfreq(size_px)[:, None]
-    k_c = np.fft.rfftfreq(size_px)[None, :]
-    ramp = np.exp(2j * np.pi * (k_r + k_c)).astype(np.complex64)
-    ramp.setflags(write=False)
-    return ramp
 
 
 def _peak_to_metres(peak: Peak, cell_m: float) -> FloatArray:
@@ -324,9 +313,8 @@ def _coarse_translation(
     radius = None if hint_xy is None else tcfg.hint_radius_m / level.cell_m
     hypotheses = []
     for turn in turns:
-        candidate = spectrum if turn == 0.0 else _half_turn_ramp(shape[0]) * np.conj(spectrum)
         surface = correlate(
-            ref.coarse_spectrum, candidate, shape, tcfg.smoothing_px, tcfg.whitening
+            ref.coarse_spectrum, spectrum, shape, tcfg.smoothing_px, tcfg.whitening, turn != 0.0
         )
         hypotheses.append((locate_peak(surface, tcfg.smoothing_px, centre, radius), turn))
     peak, turn = max(hypotheses, key=lambda h: h[0].quality)

@@ -1,11 +1,15 @@
-"""The odometry's fast paths equal the straightforward computations they replace, bit for bit.
+"""The odometry's fast paths equal the straightforward computations they replace.
 
-The compiled sampling-map kernel against its vectorised numpy reference, the uint16 block mean
-against OpenCV's area resize, the per-scan caches (wrapped polar image, refinement spectrum)
-against fresh computations.
+Bit for bit: the compiled sampling-map kernel against its vectorised numpy reference, the uint16
+block mean against OpenCV's area resize, the per-scan caches (wrapped polar image, refinement
+spectrum) against fresh computations. To float32 precision (the compiled kernels round
+differently from numpy's SIMD loops): the cross-power spectra of the 2-D and 1-D phase
+correlations, the peak statistics, the row spectra and the Fourier-Mellin log magnitude.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import cv2
 import numpy as np
@@ -14,7 +18,18 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
 from odometry.deskew import _MapConstants, _sampling_maps_numpy, sampling_maps
-from odometry.phase_correlation import forward
+from odometry.packed import forward_rows, inverse, pack, unpack, unpack_rows
+from odometry.phase_correlation import (
+    PEAK_EXCLUSION_SIGMAS,
+    SPECTRUM_EPS,
+    correlate,
+    correlate_1d,
+    forward,
+    gaussian_lowpass,
+    half_turn_ramp,
+    locate_peak,
+    locate_peak_1d,
+)
 from odometry.preprocess import (
     _ring_level,
     block_mean,
@@ -25,7 +40,12 @@ from odometry.preprocess import (
     render_cartesian,
 )
 from odometry.registration import PreparedScan, _residual_rotation
-from odometry.rotation import angular_spectrum, polar_grid, refine_rotation
+from odometry.rotation import (
+    _centred_log_magnitude,
+    angular_spectrum,
+    polar_grid,
+    refine_rotation,
+)
 from raplace.warp import remap, remap_wrapped, wrap_rows
 
 N_AZ = 400
@@ -105,6 +125,11 @@ def test_wrapped_polar_cache_equals_fresh_wrap_and_remap() -> None:
     polar = preprocess_polar(_blob_scan(1), PreprocessConfig(bin_size_m=0.2, max_range_m=80.0))
     np.testing.assert_array_equal(polar.wrapped_image, wrap_rows(polar.image))
     assert polar.wrapped_image is polar.wrapped_image  # made once
+    assert np.shares_memory(polar.wrapped_image, polar.image)  # preprocess made it: no copy
+    # An image that is not the head of such an array is wrapped afresh.
+    other = dataclasses.replace(polar, image=polar.image.copy())
+    np.testing.assert_array_equal(other.wrapped_image, polar.wrapped_image)
+    assert not np.shares_memory(other.wrapped_image, other.image)
     rng = np.random.default_rng(2)
     bins = rng.uniform(-2.0, polar.image.shape[1] + 2.0, (50, 60)).astype(np.float32)
     rows = rng.uniform(0.0, N_AZ, (50, 60)).astype(np.float32)
@@ -151,3 +176,162 @@ def test_ring_median_from_counts_equals_float_partition() -> None:
         expected = np.partition(image, N_AZ // 2, axis=0)[N_AZ // 2]
         np.testing.assert_array_equal(_ring_level(image, sums, factor), expected)
         np.testing.assert_array_equal(_ring_level(image, None, factor), expected)
+
+
+def _correlate_numpy(
+    f_ref: np.ndarray,
+    f_mov: np.ndarray,
+    shape: tuple[int, int],
+    smoothing_px: float,
+    whitening: float,
+    half_turn: bool,
+) -> np.ndarray:
+    """`correlate` in plain numpy operations on half spectra."""
+    h_ref, h_mov = unpack(f_ref), unpack(f_mov)
+    if half_turn:
+        h_mov = half_turn_ramp(shape[0]) * np.conj(h_mov)
+    cross = h_mov * np.conj(h_ref)
+    if whitening > 0:
+        magnitude = np.abs(cross) + np.float32(SPECTRUM_EPS)
+        cross /= magnitude if whitening == 1.0 else magnitude**whitening
+    cross *= gaussian_lowpass(shape, smoothing_px)
+    return np.fft.irfft2(cross, s=shape)
+
+
+def _correlate_1d_numpy(
+    s_ref: np.ndarray, s_mov: np.ndarray, n: int, smoothing: float
+) -> np.ndarray:
+    """`correlate_1d` in plain numpy operations."""
+    cross = s_mov * np.conj(s_ref)
+    cross /= np.abs(cross) + np.float32(SPECTRUM_EPS)
+    summed = cross.sum(axis=0)
+    summed[0] = 0.0
+    summed *= np.exp(-2.0 * (np.pi * smoothing * np.fft.rfftfreq(n)) ** 2)
+    return np.fft.irfft(summed, n=n) / cross.shape[0]
+
+
+def _relative_error(actual: np.ndarray, expected: np.ndarray) -> float:
+    return float(np.abs(actual - expected).max() / np.abs(expected).max())
+
+
+def _shifted_pair(size: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    image = cv2.GaussianBlur(rng.random((size, size), dtype=np.float32), (0, 0), 1.5)
+    return image, np.roll(image, (int(rng.integers(-20, 20)), int(rng.integers(-20, 20))), (0, 1))
+
+
+@pytest.mark.parametrize("half_turn", [False, True])
+@pytest.mark.parametrize("whitening", [1.0, 0.5, 0.0])
+def test_cross_power_kernel_equals_numpy_reference(half_turn: bool, whitening: float) -> None:
+    ref, moved = _shifted_pair(96, seed=int(10 * whitening) + half_turn)
+    args = (forward(ref), forward(moved), ref.shape, 1.3, whitening, half_turn)
+    surface = correlate(*args)
+    expected = _correlate_numpy(*args)
+    assert surface.dtype == np.float32 and surface.shape == ref.shape
+    assert _relative_error(surface, expected) < 1e-6
+    assert np.argmax(surface) == np.argmax(expected)
+
+
+def test_summed_angular_correlation_equals_numpy_reference() -> None:
+    rng = np.random.default_rng(4)
+    polar = rng.random((40, 180), dtype=np.float32)
+    turned = np.roll(polar, 7, axis=1) + rng.normal(0, 0.1, polar.shape).astype(np.float32)
+    s_ref, s_mov = forward_rows(polar), forward_rows(turned)
+    np.testing.assert_allclose(unpack_rows(s_ref), np.fft.rfft(polar, axis=1), rtol=0, atol=1e-4)
+    odd = polar[:, :179]
+    np.testing.assert_allclose(unpack_rows(forward_rows(odd)), np.fft.rfft(odd, axis=1), atol=1e-4)
+    curve = correlate_1d(s_ref, s_mov, 180, 1.0)
+    expected = _correlate_1d_numpy(unpack_rows(s_ref), unpack_rows(s_mov), 180, 1.0)
+    s_odd = forward_rows(turned[:, :179])
+    odd_curve = correlate_1d(forward_rows(odd), s_odd, 179, 1.0)
+    odd_expected = _correlate_1d_numpy(unpack_rows(forward_rows(odd)), unpack_rows(s_odd), 179, 1.0)
+    assert _relative_error(odd_curve, odd_expected) < 1e-6
+    assert _relative_error(curve, expected) < 1e-6
+    assert int(np.argmax(curve)) == 7
+
+
+def test_peak_statistics_equal_numpy_formulas() -> None:
+    ref, moved = _shifted_pair(128, seed=8)
+    surface = correlate(forward(ref), forward(moved), ref.shape, 1.0)
+    h, w = surface.shape
+    rng = np.random.default_rng(9)
+    exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * 1.0)) + 1
+    for centre in [None, (3.2, -7.9), (-63.0, 62.6), *rng.uniform(-64, 64, (5, 2))]:
+        peak = locate_peak(surface, 1.0, None if centre is None else tuple(centre), 6.0)
+        i0, j0 = (int(round(v)) % n for v, n in zip(peak.shift_px, (h, w), strict=True))
+        if centre is None:
+            assert surface[i0, j0] == surface.max()
+        else:  # the window's maximum (np.argmax order on ties)
+            rows = (int(round(centre[0])) + np.arange(-6, 7)) % h
+            cols = (int(round(centre[1])) + np.arange(-6, 7)) % w
+            window = surface[np.ix_(rows, cols)]
+            a, b = divmod(int(np.argmax(window)), window.shape[1])
+            assert peak.height == float(window[a, b])
+            i0, j0 = int(rows[a]), int(cols[b])
+        keep = np.ones(h, dtype=bool)
+        keep[(i0 + np.arange(-exclude, exclude + 1)) % h] = False
+        assert peak.noise == pytest.approx(float(np.std(surface[keep])), rel=1e-5)
+        patch = surface[np.ix_((i0 + np.arange(-1, 2)) % h, (j0 + np.arange(-1, 2)) % w)]
+        logp = np.log(np.maximum(patch.astype(np.float64), max(peak.height, 1e-30) * 1e-3))
+        hyy = logp[2, 1] - 2.0 * logp[1, 1] + logp[0, 1]
+        hxx = logp[1, 2] - 2.0 * logp[1, 1] + logp[1, 0]
+        hxy = 0.25 * (logp[2, 2] - logp[2, 0] - logp[0, 2] + logp[0, 0])
+        np.testing.assert_allclose(peak.curvature, -np.array([[hyy, hxy], [hxy, hxx]]), atol=1e-9)
+        grad = 0.5 * np.array([logp[2, 1] - logp[0, 1], logp[1, 2] - logp[1, 0]])
+        if np.linalg.eigvalsh(peak.curvature).min() > 1e-6:
+            offset = np.clip(np.linalg.solve(peak.curvature, grad), -1.0, 1.0)
+            wrapped = (np.array([i0, j0]) + offset + [h / 2, w / 2]) % [h, w] - [h / 2, w / 2]
+            np.testing.assert_allclose(peak.shift_px, wrapped, atol=1e-9)
+
+
+def test_centred_log_magnitude_equals_numpy() -> None:
+    ref, _ = _shifted_pair(64, seed=12)
+    packed = forward(ref)
+    spectrum = unpack(packed)
+    out = np.empty(spectrum.shape, np.float32)
+    _centred_log_magnitude(packed, out)
+    expected = np.fft.fftshift(np.log1p(np.abs(spectrum)), axes=0)
+    np.testing.assert_allclose(out, expected, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("shape", [(4, 6), (64, 64), (96, 40)])
+def test_packed_spectrum_round_trips_through_numpy_layout(shape: tuple[int, int]) -> None:
+    image = np.random.default_rng(shape[0]).random(shape, dtype=np.float32)
+    packed = forward(image)
+    half = np.fft.rfft2(image.astype(np.float64))
+    assert packed.shape == shape and packed.dtype == np.float32
+    assert _relative_error(unpack(packed), half) < 1e-6
+    np.testing.assert_array_equal(pack(unpack(packed)), packed)
+    np.testing.assert_allclose(inverse(packed) / image.size, image, atol=1e-5)
+    with pytest.raises(ValueError, match="even"):
+        forward(np.zeros((5, 8), np.float32))
+
+
+def test_angular_peak_statistics_equal_numpy_formulas() -> None:
+    rng = np.random.default_rng(13)
+    curve = np.roll(np.exp(-0.5 * (np.arange(360) - 180.0) ** 2 / 1.5**2), 97)
+    curve = curve + rng.normal(0, 0.01, 360)
+    peak = locate_peak_1d(curve, 1.0)
+    i0 = int(np.argmax(curve))
+    exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * 1.0)) + 1
+    keep = np.ones(360, dtype=bool)
+    keep[(i0 + np.arange(-exclude, exclude + 1)) % 360] = False
+    assert peak.quality == pytest.approx(curve[i0] / np.std(curve[keep]), rel=1e-9)
+    logt = np.log(curve[(i0 + np.arange(-1, 2)) % 360])
+    second = logt[0] - 2.0 * logt[1] + logt[2]
+    assert peak.curvature == pytest.approx(-second, rel=1e-12)
+    expected = i0 + 0.5 * (logt[0] - logt[2]) / second
+    assert peak.shift == pytest.approx((expected + 180.0) % 360 - 180.0, abs=1e-9)
+    assert abs(peak.shift - (277 - 360)) < 0.1  # the true peak, wrapped to [-180, 180)
+
+
+def test_peak_covariance_closed_form_equals_linalg() -> None:
+    ref, moved = _shifted_pair(64, seed=21)
+    peak = locate_peak(correlate(forward(ref), forward(moved), ref.shape, 1.0), 1.0)
+    assert np.linalg.eigvalsh(peak.curvature).min() > 1e-6
+    expected = np.linalg.inv(peak.curvature) / max(peak.quality, 1.0) ** 2
+    np.testing.assert_allclose(peak.covariance_px(), expected, rtol=1e-12)
+    flat = dataclasses.replace(peak, curvature=np.array([[1.0, 0.0], [0.0, -1.0]]))
+    np.testing.assert_array_equal(
+        flat.covariance_px(), np.eye(2) * 1e2 / max(peak.quality, 1.0) ** 2
+    )

@@ -214,7 +214,7 @@ class Odometry:
 
     # -- steps ---------------------------------------------------------------------------------
     def _prepare(self, frame: Scan) -> PreparedScan:
-        """Condition a scan and render it, de-skewed with the running velocity."""
+        """Condition a scan and render it, de-skewed at the running velocity without its trend."""
         state, cfg = self._state, self.config
         polar = preprocess_polar(frame, cfg.preprocess)
         twist = None

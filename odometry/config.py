@@ -262,12 +262,13 @@ class DeskewConfig:
         mid_sweep: de-skew the images to the mid-sweep pose and register those (a velocity
             error then smears an image symmetrically instead of displacing it); the motion
             between the scans' reference times follows with the velocity.
-        yaw_rate_extrapolation: in `Odometry`, the yaw rate wanted at a time (to de-skew a scan,
-            or to move a pose from mid-sweep to the reference time) is the last measured one
-            plus this fraction of its trend extrapolated to that time (0: constant velocity);
-            the extrapolated change is bounded by the last measured change and never turns the
-            yaw rate to the other side. It never enters the prediction a registration is
-            compared with.
+        yaw_rate_extrapolation: in `Odometry`, the yaw rate wanted at a time (to move a pose
+            from mid-sweep to the reference time, to re-render a new keyframe, and as the second
+            de-skew hypothesis of a new scan, first de-skewed at constant velocity; the stronger
+            correlation picks the de-skew) is the last measured one plus this fraction of its
+            trend extrapolated to that time (0: constant velocity); the extrapolated change is
+            bounded by the last measured change and never turns the yaw rate to the other side.
+            It never enters the prediction a registration is compared with.
     """
 
     enabled: bool = True

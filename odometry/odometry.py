@@ -10,11 +10,14 @@ Motion distortion: each scan is de-skewed with the running velocity to its mid-s
 image symmetrically instead of displacing it; registrations chain the image poses. A scan's pose
 at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
 measured between the last two image poses; that move's error does not accumulate, and its
-covariance is added to the registration's. The velocity used for de-skewing follows the trend of
-the yaw rate (`DeskewConfig.yaw_rate_extrapolation`), bounded so that it never extrapolates more
-than the last measured change nor turns the yaw rate to the other side. When the velocity a scan
-was de-skewed with is far from the one its registration then measures (hard braking, a curvature
-step at a junction), the scan is re-rendered with the measured one and registered again.
+covariance is added to the registration's. A new scan is de-skewed at constant velocity; while the
+yaw rate changes, the scan de-skewed with the yaw-rate trend (`DeskewConfig.yaw_rate_extrapolation`,
+bounded so that it never extrapolates more than the last measured change nor turns the yaw rate to
+the other side) is registered too and the stronger correlation decides which de-skew the scan
+keeps: past motion cannot tell a turn that goes on tightening from a curvature step or a yaw-rate
+reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
+from the one its registration then measures (hard braking, a curvature step at a junction), the
+scan is re-rendered with the measured one and registered again.
 
 Each registration is global (rotation over the full circle, translation over the whole coarse
 image; `registration.register_images`); the constant-velocity prediction is a search hint, never
@@ -206,16 +209,19 @@ class Odometry:
         reference, estimate = self._search(index, scan, predicted)
         if reference is None:
             return self._gap(index, scan, predicted, estimate)
+        scan, estimate = self._trend_hypothesis(reference, scan, estimate)
         return self._accept(index, scan, reference, estimate, dt_s)
 
     # -- steps ---------------------------------------------------------------------------------
     def _prepare(self, frame: Scan) -> PreparedScan:
-        """Condition a scan and render it, de-skewed with the running velocity."""
+        """Condition a scan and render it, de-skewed at the running velocity without its trend."""
         state, cfg = self._state, self.config
         polar = preprocess_polar(frame, cfg.preprocess)
         twist = None
         if state.velocity is not None and cfg.deskew.enabled:
-            twist = self._velocity_at(polar.timestamp_ns + _ns(polar.mid_sweep_s or 0.0))
+            twist = self._velocity_at(
+                polar.timestamp_ns + _ns(polar.mid_sweep_s or 0.0), trend=False
+            )
         return PreparedScan(polar, twist, cfg)
 
     def _start(self, index: int, scan: PreparedScan) -> OdometryResult:
@@ -413,10 +419,12 @@ class Odometry:
     def _trend_gain(self) -> float:
         return self.config.deskew.yaw_rate_extrapolation
 
-    def _velocity_at(self, time_ns: int) -> FloatArray:
-        """The running twist expected at `time_ns`, within the plausible speed and yaw rate."""
+    def _velocity_at(self, time_ns: int, trend: bool = True) -> FloatArray:
+        """The running twist expected at `time_ns` (with the bounded yaw-rate trend, or constant
+        without `trend`), within the plausible speed and yaw rate."""
         assert self._state.velocity is not None
-        return bounded_twist(self._state.velocity.at(time_ns, self._trend_gain), self.config)
+        gain = self._trend_gain if trend else 0.0
+        return bounded_twist(self._state.velocity.at(time_ns, gain), self.config)
 
     def _update_velocity(
         self, base: _ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float
@@ -478,6 +486,23 @@ class Odometry:
         if scan.twist is not None and close_twists(new, scan.twist):
             return scan
         return PreparedScan(scan.polar, new, self.config)
+
+    def _trend_hypothesis(
+        self, reference: _ScanNode, scan: PreparedScan, estimate: MotionEstimate
+    ) -> tuple[PreparedScan, MotionEstimate]:
+        """`scan` (de-skewed at constant velocity) and its estimate, or the scan de-skewed with
+        the yaw-rate trend and its registration (seeded with the first) when that correlates
+        more strongly; nothing is tried when the trend hardly changes the twist."""
+        if scan.twist is None or self._state.velocity is None:
+            return scan, estimate
+        trend = self._velocity_at(_image_time_ns(scan))
+        if close_twists(trend, scan.twist):
+            return scan, estimate
+        alternative = PreparedScan(scan.polar, trend, self.config)
+        other = register_images(reference.scan, alternative, self.config, hint=estimate.motion)
+        if other.ok and other.quality > estimate.quality:
+            return alternative, other
+        return scan, estimate
 
     def _gap(
         self,

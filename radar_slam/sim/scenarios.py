@@ -18,8 +18,9 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 | long_city | a city-length drive, revisits both ways: long-drive benchmark | 10000 | ~24 km |
 
 Driving scenarios (`DRIVING_SCENARIOS`, each also as `tiny_<name>` at 1024 bins for CI):
-turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear, and
-the held-out heldout_town and heldout_mixed (`HELD_OUT`: benchmarks report them separately and
+turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear,
+roundabouts (six in a row, a tuning scenario for yaw-rate reversals), and the held-out
+heldout_town, heldout_mixed and heldout_junctions (`HELD_OUT`: benchmarks report them separately and
 nobody tunes on them). All but turn_around drive a plan (manoeuvres.py) with stepped curvature.
 """
 
@@ -364,6 +365,8 @@ _ROUNDABOUT_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2), (2, 3))
 _STOP_AND_GO_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2), (3, 2))
 _JUNCTION_ROUTE: Waypoints = ((0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3))
 _REVERSE_GEAR_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2))
+_ROUNDABOUTS_ROUTE: Waypoints = ((0, 1), (3, 1), (3, 2), (1, 2), (1, 3))
+"""Six roundabouts in a row (straight on, straight on, left, left, straight on, right)."""
 _HELD_OUT_TOWN_ROUTE: Waypoints = (
     (1, 1),
     (3, 1),
@@ -491,6 +494,20 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         start_ns=EPOCH_NS + 13 * DAY_NS,
         town=_plan_town(),
         plan=DrivePlan(events=(Reverse(1, 60.0, 30.0),)),
+    ),
+    Scenario(
+        name="roundabouts",
+        description="six roundabouts in a row (straight on, left, right), at 12-14 m/s between "
+        "them: the yaw rate reverses at every entry and exit",
+        seed=38,
+        waypoints=_ROUNDABOUTS_ROUTE,
+        town_routes=(_ROUNDABOUTS_ROUTE,),
+        start_ns=EPOCH_NS + 17 * DAY_NS,
+        town=_plan_town(**_OPEN_JUNCTIONS),
+        plan=DrivePlan(
+            events=tuple(Roundabout(node) for node in range(1, 7)),
+            driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(12.0, 14.0)),
+        ),
     ),
     Scenario(
         name="heldout_town",

@@ -184,6 +184,9 @@ class QualityConfig:
             times half a sweep; this multiple of that bend is added as a standard deviation
             (translation [m] and rotation [rad]; above 1 because the measured change itself lags
             the true one).
+        Both are off (0) by default: with the loops' covariances not calibrated alike, looser
+        odometry factors in turns let the loops bend the trajectory (see the README's de-skew
+        notes); 0.1 and 1.25 make the odometry's own covariances consistent in hard driving.
     """
 
     min_peak_quality: float = 6.0
@@ -198,8 +201,8 @@ class QualityConfig:
     gap_sigma_xy_m: float = 1.0
     gap_sigma_yaw_deg: float = 5.0
     velocity_lag_fraction: float = 0.25
-    sigma_yaw_deg_per_deg: float = 0.1
-    deskew_error_fraction: float = 1.25
+    sigma_yaw_deg_per_deg: float = 0.0
+    deskew_error_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (

@@ -69,6 +69,8 @@ class Window:
     peak_rss_mb: float
     database: int
     query_ms: float | None
+    steps_s: dict[str, float]
+    """Seconds each pipeline step took within the window (`Pipeline.timer`)."""
 
 
 def long_sequence(frames: int | None, data_root: Path | None) -> RadarSequence:
@@ -123,6 +125,7 @@ class Recorder:
         self._last_scans = 0
         self._last_time = time.perf_counter()
         self._probe_s = 0.0
+        self._last_steps: dict[str, float] = {}
 
     def __call__(self, progress: Progress) -> None:
         if progress.done % self.every and progress.done != progress.total:
@@ -133,14 +136,23 @@ class Recorder:
         query_ms = probe_query_ms(detector)
         size = len(detector) if isinstance(detector, LoopDetector) else 0
         scans = progress.done - self._last_scans
+        steps = {} if self.pipeline is None else dict(self.pipeline.timer.seconds)
         window = Window(
-            progress.done, scans / elapsed, current_rss_mb(), peak_rss_mb(), size, query_ms
+            progress.done,
+            scans / elapsed,
+            current_rss_mb(),
+            peak_rss_mb(),
+            size,
+            query_ms,
+            {step: t - self._last_steps.get(step, 0.0) for step, t in steps.items()},
         )
+        self._last_steps = steps
         self.windows.append(window)
         print(
             f"  {window.scans:6d} scans: {window.scans_per_s:6.1f} scans/s, RSS "
             f"{window.rss_mb:7.1f} MB (peak {window.peak_rss_mb:7.1f}), database {size:5d}, query "
-            f"{'n/a' if query_ms is None else f'{query_ms:.2f} ms'}",
+            f"{'n/a' if query_ms is None else f'{query_ms:.2f} ms'}; "
+            + ", ".join(f"{step} {t:.1f} s" for step, t in window.steps_s.items()),
             flush=True,
         )
         self._last_scans = progress.done
@@ -201,12 +213,13 @@ def main() -> None:
     parser.add_argument("--plot", type=Path, default=Path("docs/long_drive.png"))
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--data-root", type=Path, default=None)
+    parser.add_argument("--config", type=Path, default=None, help="YAML overrides")
     args = parser.parse_args()
     core = pin_to_one_core()
     sequence = long_sequence(args.frames, args.data_root)
     # One core, sequential: the probes query the database the loop detector fills, which a loop
     # thread would be changing under them.
-    config = with_workers(load_config(sequence.family), 1)
+    config = with_workers(load_config(sequence.family, args.config), 1)
     recorder = Recorder(args.every)
     pipeline = Pipeline(sequence, config, max_frames=args.frames, progress=recorder)
     recorder.pipeline = pipeline

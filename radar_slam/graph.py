@@ -68,6 +68,9 @@ DEFAULT_ISAM2_RELINEARIZE_THRESHOLD = 0.01
 DEFAULT_ISAM2_RELINEARIZE_SKIP = 1
 """ISAM2 checks for relinearisation every this many updates."""
 
+DEFAULT_LOOP_UPDATE_INTERVAL = 10
+"""Scans between ISAM2 updates that carry loops in `radar_slam.pipeline.Pipeline`."""
+
 DEFAULT_ISAM2_ITERATIONS = 1
 """ISAM2 update steps per `PoseGraph.update()`: the first carries the new factors, the others
 relinearise once more (helps after a large loop-closure correction)."""
@@ -95,6 +98,9 @@ class GraphConfig:
         isam2_relinearize_threshold: ISAM2 relinearisation threshold (tangent units, m / rad).
         isam2_relinearize_skip: ISAM2 relinearisation check interval (updates).
         isam2_iterations: ISAM2 steps per `PoseGraph.update()` (>= 1).
+        loop_update_interval: the pipeline adds accepted loops to the graph as they come but runs
+            ISAM2 at most once every this many scans (each loop update re-eliminates the path
+            back to the loop's older end; 1: after every scan with new loops).
         final_pass: batch pass of `optimize_final()`: Levenberg-Marquardt with the robust loop
             kernel, graduated non-convexity (odometry and priors known inliers, loops plain
             Gaussian under the GNC loss), or nothing.
@@ -110,6 +116,7 @@ class GraphConfig:
     isam2_relinearize_threshold: float = DEFAULT_ISAM2_RELINEARIZE_THRESHOLD
     isam2_relinearize_skip: int = DEFAULT_ISAM2_RELINEARIZE_SKIP
     isam2_iterations: int = DEFAULT_ISAM2_ITERATIONS
+    loop_update_interval: int = DEFAULT_LOOP_UPDATE_INTERVAL
     final_pass: FinalPass = "gnc"
     lm_max_iterations: int = DEFAULT_LM_MAX_ITERATIONS
     lm_relative_error_tol: float = DEFAULT_LM_RELATIVE_ERROR_TOL
@@ -128,6 +135,7 @@ class GraphConfig:
         checks.positive("loop_kernel_width", self.loop_kernel_width)
         checks.at_least("isam2_relinearize_skip", self.isam2_relinearize_skip, 1)
         checks.at_least("isam2_iterations", self.isam2_iterations, 1)
+        checks.at_least("loop_update_interval", self.loop_update_interval, 1)
         checks.at_least("lm_max_iterations", self.lm_max_iterations, 1)
         checks.positive("lm_relative_error_tol", self.lm_relative_error_tol)
         checks.in_range("gnc_inlier_probability", self.gnc_inlier_probability, 0.0, 1.0, True, True)

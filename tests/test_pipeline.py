@@ -17,6 +17,7 @@ from radar_slam.evaluation.false_loops import FakeLoopConfig, FalseLoopInjection
 from radar_slam.evaluation.metrics import evaluate
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.g2o import G2oEdge, G2oGraph
+from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
     GeometricVerifier,
     LoopDetector,
@@ -63,6 +64,38 @@ def test_a_revisit_closes_the_loop_and_the_ate_drops(tiny_loop: RadarSequence, b
     assert m.ate_reduction is not None and m.ate_reduction >= 1 - MAX_ATE_RATIO
     assert set(baseline.timings_s) >= {"read", "odometry", "graph", "loop detection"}
     assert m.frames_per_second > 0
+
+
+def test_loops_batched_into_fewer_isam2_updates_give_the_same_result(
+    tiny_loop: RadarSequence, baseline: Results, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`graph.loop_update_interval` (10 by default) runs ISAM2 at most every 10 scans instead of
+    after every scan with new loops: the same loops, and the final batch pass lands on the same
+    trajectory."""
+    updates: list[int] = []
+    original = PoseGraph.update
+
+    def counted(graph: PoseGraph) -> None:
+        updates.append(len(graph.keys()))
+        original(graph)
+
+    monkeypatch.setattr(PoseGraph, "update", counted)
+    config = load_config("synthetic")
+    every_scan = dataclasses.replace(
+        config, graph=dataclasses.replace(config.graph, loop_update_interval=1)
+    )
+    eager = Pipeline(tiny_loop, every_scan).run()
+    eager_updates = len(updates)
+    updates.clear()
+    batched = Pipeline(tiny_loop, config).run()
+    assert config.graph.loop_update_interval == 10
+    assert len(updates) < eager_updates
+    during_run = [n for n in updates if n < len(tiny_loop)]  # not the final ones
+    assert np.all(np.diff(during_run) >= config.graph.loop_update_interval)
+    assert batched.metrics.loops_accepted == eager.metrics.loops_accepted
+    assert batched.metrics.loops_accepted == baseline.metrics.loops_accepted
+    offsets = np.hypot(*(batched.slam.poses[:, :2] - eager.slam.poses[:, :2]).T)
+    assert offsets.max() < 1e-3, offsets.max()
 
 
 def test_thirty_percent_false_loops_raise_the_ate_at_most_ten_percent(

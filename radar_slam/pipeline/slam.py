@@ -108,6 +108,8 @@ class Pipeline:
         self.timer = StepTimer()
         self._results: list[OdometryResult] = []
         self._loop_ids: dict[tuple[int, int], int] = {}  # (query, match) -> graph loop id
+        self._loops_pending = False  # loops added to the graph since its last ISAM2 update
+        self._last_update = 0  # scan index of that update
         self._start = 0.0
         concurrency = self.config.concurrency
         self.loops: InlineLoopRunner = make_loop_runner(
@@ -130,11 +132,11 @@ class Pipeline:
                 result = self._track(frame)
                 self._extend_graph(result)
                 self.loops.submit(frame, result.pose, result.index)
-                self._close_loops(self.loops.due(index))
+                self._close_loops(self.loops.due(index), index)
                 self._report(index + 1)
                 if self.observer is not None:
                     self.observer.on_scan(self, frame, result)
-            self._close_loops(self.loops.finish())
+            self._close_loops(self.loops.finish(), None)
         finally:
             reader.close()
             self.loops.close()
@@ -170,14 +172,19 @@ class Pipeline:
             self.graph.add_keyframe(result.index, self.graph.predict(previous, measurement))
             self.graph.add_odometry(previous, result.index, measurement, covariance)
 
-    def _close_loops(self, loops: list[LoopConstraint]) -> None:
-        if not loops:
-            return
+    def _close_loops(self, loops: list[LoopConstraint], index: int | None) -> None:
+        """Add `loops` to the graph; run ISAM2 once `graph.loop_update_interval` scans have
+        passed since its last update (at once when `index` is None: the end of the run)."""
         with self.timer("graph"):
             for loop in loops:
                 loop_id = self.graph.add_loop(loop.i, loop.j, loop.measurement, loop.covariance)
                 self._loop_ids[(loop.i, loop.j)] = loop_id
-            self.graph.update()
+            self._loops_pending |= bool(loops)
+            interval = self.config.graph.loop_update_interval
+            if self._loops_pending and (index is None or index - self._last_update >= interval):
+                self.graph.update()
+                self._loops_pending = False
+                self._last_update = -1 if index is None else index
 
     def _report(self, done: int) -> None:
         if self.progress is None:

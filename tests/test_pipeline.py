@@ -67,7 +67,7 @@ def test_a_revisit_closes_the_loop_and_the_ate_drops(tiny_loop: RadarSequence, b
 
 
 def test_loops_batched_into_fewer_isam2_updates_give_the_same_result(
-    tiny_loop: RadarSequence, baseline: Results, monkeypatch: pytest.MonkeyPatch
+    tiny_loop: RadarSequence, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """`graph.loop_update_interval` (10 by default) runs ISAM2 at most every 10 scans instead of
     after every scan with new loops: the same loops, and the final batch pass lands on the same
@@ -92,8 +92,7 @@ def test_loops_batched_into_fewer_isam2_updates_give_the_same_result(
     assert len(updates) < eager_updates
     during_run = [n for n in updates if n < len(tiny_loop)]  # not the final ones
     assert np.all(np.diff(during_run) >= config.graph.loop_update_interval)
-    assert batched.metrics.loops_accepted == eager.metrics.loops_accepted
-    assert batched.metrics.loops_accepted == baseline.metrics.loops_accepted
+    assert batched.metrics.loops_accepted == eager.metrics.loops_accepted >= 3
     offsets = np.hypot(*(batched.slam.poses[:, :2] - eager.slam.poses[:, :2]).T)
     assert offsets.max() < 1e-3, offsets.max()
 

@@ -174,17 +174,18 @@ class Pipeline:
 
     def _close_loops(self, loops: list[LoopConstraint], index: int | None) -> None:
         """Add `loops` to the graph; run ISAM2 once `graph.loop_update_interval` scans have
-        passed since its last update (at once when `index` is None: the end of the run)."""
+        passed since its last update (`index` None: the end of the run, where `_optimise`
+        updates)."""
         with self.timer("graph"):
             for loop in loops:
                 loop_id = self.graph.add_loop(loop.i, loop.j, loop.measurement, loop.covariance)
                 self._loop_ids[(loop.i, loop.j)] = loop_id
             self._loops_pending |= bool(loops)
             interval = self.config.graph.loop_update_interval
-            if self._loops_pending and (index is None or index - self._last_update >= interval):
+            if index is not None and self._loops_pending and index - self._last_update >= interval:
                 self.graph.update()
                 self._loops_pending = False
-                self._last_update = -1 if index is None else index
+                self._last_update = index
 
     def _report(self, done: int) -> None:
         if self.progress is None:

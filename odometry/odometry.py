@@ -46,6 +46,7 @@ from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.preprocess import preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
+from odometry.uncertainty import conversion_covariance, unseen_covariance
 from odometry.velocity import (
     REDESKEW_MPS,
     REDESKEW_RADPS,
@@ -345,12 +346,16 @@ class Odometry:
             pose=pose,
             image_pose=image_pose,
             scan=scan,
-            conversion_covariance=self._conversion_covariance(
-                estimate.covariance, change, scan, _image_interval_s(previous, scan, dt_s)
+            conversion_covariance=conversion_covariance(
+                estimate.covariance,
+                change,
+                scan.image_time_s,
+                _image_interval_s(previous, scan, dt_s),
+                self.config.quality,
             ),
         )
-        registration_covariance = estimate.covariance + _unseen_covariance(
-            estimate.motion, change, scan, self.config
+        registration_covariance = estimate.covariance + unseen_covariance(
+            estimate.motion, change, scan, self.config.quality
         )
         covariance = rotate_covariance(
             _factor_covariance(registration_covariance, reference, node),
@@ -440,25 +445,6 @@ class Odometry:
         change = twist - state.velocity.twist
         state.velocity = state.velocity.updated(twist, centre_ns)
         return change
-
-    def _conversion_covariance(
-        self,
-        registration_covariance: FloatArray,
-        velocity_change: FloatArray,
-        scan: PreparedScan,
-        interval_s: float,
-    ) -> FloatArray:
-        """Covariance (scan axes) of moving a scan's image pose to its reference time.
-
-        The offset is the velocity times `image_time_s`; the velocity is a difference of two
-        image poses `interval_s` apart (about twice a registration's covariance over the interval
-        squared) and lags a changing velocity by a fraction of its last change.
-        """
-        if scan.image_time_s == 0.0 or interval_s <= 0:
-            return np.zeros((3, 3))
-        lag = self.config.quality.velocity_lag_fraction * np.asarray(velocity_change)
-        velocity_covariance = 2.0 * registration_covariance / interval_s**2 + np.diag(lag * lag)
-        return scan.image_time_s**2 * velocity_covariance
 
     def _reference_pose(self, image_pose: FloatArray, scan: PreparedScan) -> FloatArray:
         """T_world_radar at the scan's reference time from its image pose, with the velocity
@@ -604,20 +590,3 @@ def _factor_covariance(
             node.conversion_covariance, float(between(reference.pose, node.pose)[2])
         )
     )
-
-
-def _unseen_covariance(
-    motion: FloatArray, velocity_change: FloatArray, scan: PreparedScan, cfg: OdometryConfig
-) -> FloatArray:
-    """(3, 3) covariance [m^2, rad^2] of registration errors the correlation peak does not show
-    (`QualityConfig`): a rotation error growing with the turn of `motion` (3,) (dx, dy [m],
-    dyaw [rad]), and the bend of a scan de-skewed with a velocity that lags the vehicle's by
-    about `velocity_change` (3,) (its last change [m/s, m/s, rad/s]) over half a sweep. The
-    translation term is isotropic, so the axes it is expressed in do not matter."""
-    qcfg = cfg.quality
-    timing = scan.polar.timing
-    half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
-    bend = qcfg.deskew_error_fraction * half_sweep_s * np.abs(np.asarray(velocity_change))
-    sigma_xy_sq = float(bend[0] ** 2 + bend[1] ** 2)
-    sigma_yaw = qcfg.sigma_yaw_deg_per_deg * abs(wrap_angle(float(motion[2])))
-    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_yaw**2 + float(bend[2] ** 2)])

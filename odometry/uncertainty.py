@@ -1,0 +1,54 @@
+"""Covariance terms of the odometry that a registration's correlation peak does not show.
+
+Pure functions used by `odometry.Odometry`: the error of moving a scan's mid-sweep image pose to
+its reference time with a measured velocity, and the registration errors that grow with the
+turn and with a de-skew velocity that lags the vehicle's (`QualityConfig`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from odometry.config import QualityConfig
+from odometry.registration import PreparedScan
+from raplace.se2 import wrap_angle
+
+FloatArray = NDArray[np.float64]
+
+
+def conversion_covariance(
+    registration_covariance: FloatArray,
+    velocity_change: ArrayLike,
+    image_time_s: float,
+    interval_s: float,
+    quality: QualityConfig,
+) -> FloatArray:
+    """(3, 3) covariance (scan axes) of moving a scan's image pose to its reference time.
+
+    The offset is the velocity times `image_time_s` [s]; the velocity is a difference of two
+    image poses `interval_s` [s] apart (about twice a registration's covariance
+    `registration_covariance` over the interval squared) and lags a changing velocity by
+    `quality.velocity_lag_fraction` of its last change `velocity_change` (3,) [m/s, m/s, rad/s].
+    """
+    if image_time_s == 0.0 or interval_s <= 0:
+        return np.zeros((3, 3))
+    lag = quality.velocity_lag_fraction * np.asarray(velocity_change, dtype=float)
+    velocity_covariance = 2.0 * registration_covariance / interval_s**2 + np.diag(lag * lag)
+    return image_time_s**2 * velocity_covariance
+
+
+def unseen_covariance(
+    motion: FloatArray, velocity_change: ArrayLike, scan: PreparedScan, quality: QualityConfig
+) -> FloatArray:
+    """(3, 3) covariance [m^2, rad^2] of registration errors the correlation peak does not show:
+    a rotation error growing with the turn of `motion` (3,) (dx, dy [m], dyaw [rad]), and the
+    bend of a scan de-skewed with a velocity that lags the vehicle's by about `velocity_change`
+    (3,) (its last change [m/s, m/s, rad/s]) over half a sweep. The translation term is
+    isotropic, so the axes it is expressed in do not matter."""
+    timing = scan.polar.timing
+    half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
+    bend = quality.deskew_error_fraction * half_sweep_s * np.abs(np.asarray(velocity_change))
+    sigma_xy_sq = float(bend[0] ** 2 + bend[1] ** 2)
+    sigma_yaw = quality.sigma_yaw_deg_per_deg * abs(wrap_angle(float(motion[2])))
+    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_yaw**2 + float(bend[2] ** 2)])

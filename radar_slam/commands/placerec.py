@@ -247,7 +247,7 @@ def pr_command(
         "--criterion",
         min=0.0,
         max=MAX_OPTION_VALUE,
-        help="Revisit criterion: a match is true within this distance [m] (10/20/50 in papers).",
+        help="Revisit criterion: a match is true within this distance \\[m] (10/20/50 in papers).",
     ),
     exclude_recent: int = typer.Option(
         DEFAULT_EXCLUDE_RECENT,

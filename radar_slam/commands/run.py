@@ -63,7 +63,7 @@ VIEWER_OPTION = typer.Option(  # issue-14
     None,
     "--viewer",
     help="Stream the run to Rerun: --viewer spawns the viewer, --viewer FILE.rrd saves a "
-    "recording (needs the viewer extra: pip install 'radar-slam[viewer]').",
+    "recording (needs the viewer extra: pip install 'radar-slam\\[viewer]').",
 )
 STRIDE_OPTION = typer.Option(  # issue 10: strided view of the sequence
     1, "--stride", min=1, help="Use every K-th scan (4 Hz data at --stride 4 is 1 Hz)."

@@ -29,6 +29,12 @@ RUN_FRAMES = "6"
 RUNNING_FRAMES = "60"
 
 
+def _default_sigint() -> None:
+    # A test runner started as a background job inherits SIGINT ignored, and so would the
+    # child: restore the default so that SIGINT acts as Ctrl-C in a terminal.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start(args: list[str | Path], cwd: Path) -> subprocess.Popen[bytes]:
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
     return subprocess.Popen(
@@ -37,6 +43,7 @@ def start(args: list[str | Path], cwd: Path) -> subprocess.Popen[bytes]:
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
+        preexec_fn=_default_sigint,
     )
 
 

@@ -10,7 +10,10 @@ Motion distortion: each scan is de-skewed with the running velocity to its mid-s
 image symmetrically instead of displacing it; registrations chain the image poses. A scan's pose
 at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
 measured between the last two image poses; that move's error does not accumulate, and its
-covariance is added to the registration's. A new scan is de-skewed at constant velocity; while the
+covariance is added to the registration's. Once the next scan has registered, the pose is revised
+with the velocity interpolated between the ones measured before and after it
+(`odometry.reference_time`): `register` returns the prompt result, `results` holds the revised ones
+(`odometry.history`). A new scan is de-skewed at constant velocity; while the
 yaw rate changes, the scan de-skewed with the yaw-rate trend (`DeskewConfig.yaw_rate_extrapolation`,
 bounded so that it never extrapolates more than the last measured change nor turns the yaw rate to
 the other side) is registered too and the stronger correlation decides which de-skew the scan

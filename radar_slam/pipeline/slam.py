@@ -206,9 +206,6 @@ class Pipeline:
         review_loops(self.graph, self._loop_ids, self.loop_detector)
 
     def _evaluate(self, seconds: float) -> Results:
-        # The odometry's final results: each pose revised once the next scan registered (the
-        # graph took the prompt ones as they came, which chain in their own poses).
-        self._results = self.odometry.results
         with self.timer("evaluation"):
             stamps = np.array([r.timestamp_ns for r in self._results], dtype=np.int64)
             odometry = Trajectory(stamps, np.array([r.pose for r in self._results]))

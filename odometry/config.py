@@ -272,12 +272,17 @@ class DeskewConfig:
             trend extrapolated to that time (0: constant velocity); the extrapolated change is
             bounded by the last measured change and never turns the yaw rate to the other side.
             It never enters the prediction a registration is compared with.
+        revise_reference_pose: in `Odometry`, once the next scan has registered, a scan's pose
+            in the history (`Odometry.results`) is revised: its image pose moved to the
+            reference time with the velocity interpolated between the ones measured before
+            and after it (`odometry.reference_time`); what `register` returns is not changed.
     """
 
     enabled: bool = True
     iterations: int = 1
     mid_sweep: bool = True
     yaw_rate_extrapolation: float = 1.0
+    revise_reference_pose: bool = True
 
     def __post_init__(self) -> None:
         checks.at_least("iterations", self.iterations, 0)

@@ -10,7 +10,10 @@ Motion distortion: each scan is de-skewed with the running velocity to its mid-s
 image symmetrically instead of displacing it; registrations chain the image poses. A scan's pose
 at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
 measured between the last two image poses; that move's error does not accumulate, and its
-covariance is added to the registration's. A new scan is de-skewed at constant velocity; while the
+covariance is added to the registration's. Once the next scan has registered, the pose is revised
+with the velocity interpolated between the ones measured before and after it
+(`odometry.reference_time`): `register` returns the prompt result, `results` holds the revised ones
+(`odometry.history`). A new scan is de-skewed at constant velocity; while the
 yaw rate changes, the scan de-skewed with the yaw-rate trend (`DeskewConfig.yaw_rate_extrapolation`,
 bounded so that it never extrapolates more than the last measured change nor turns the yaw rate to
 the other side) is registered too and the stronger correlation decides which de-skew the scan
@@ -43,7 +46,9 @@ from numpy.typing import ArrayLike, NDArray
 from odometry import OdometryError
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
+from odometry.history import OdometryResult, ResultHistory
 from odometry.preprocess import preprocess_polar
+from odometry.reference_time import interpolated_twist, pose_at_reference
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.uncertainty import conversion_covariance, unseen_covariance
@@ -54,50 +59,12 @@ from odometry.velocity import (
     bounded_twist,
     close_twists,
 )
-from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
+from raplace.se2 import between, compose, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class OdometryResult:
-    """The odometry's output for one scan.
-
-    Attributes:
-        index: position of the scan in the sequence registered so far (0-based).
-        timestamp_ns: the scan's reference time [ns] (the time `pose` refers to).
-        pose: (3,) T_world_radar (x, y [m], yaw [rad]) at `timestamp_ns`; the world frame is the
-            first scan's radar frame moved to `start_pose`.
-        motion: (3,) this scan's pose in the previous scan's frame (zeros for the first scan).
-        covariance: (3, 3) covariance [m^2, m rad, rad^2], order (x, y, yaw), of this scan's
-            pose relative to the scan it was registered against (`keyframe_motion`): the
-            registration's plus both moves from mid-sweep to the reference times; expressed in
-            the previous scan's axes, so that it also serves (conservatively) for `motion`.
-        keyframe_index: index of the scan it was registered against (the keyframe, or the
-            previous scan after a failure; itself for the first scan; the keyframe for a gap).
-        keyframe_motion: (3,) this scan's pose in that scan's frame.
-        is_keyframe: the scan is the keyframe for the scans that follow.
-        ok: the registration succeeded.
-        gap: the pose is a constant-velocity prediction covering a failed registration.
-        quality: peak-to-noise ratio of the translation peak (0 for the first scan or a gap).
-        reason: why the registration failed ("" when ok).
-    """
-
-    index: int
-    timestamp_ns: int
-    pose: FloatArray
-    motion: FloatArray
-    covariance: FloatArray
-    keyframe_index: int
-    keyframe_motion: FloatArray
-    is_keyframe: bool
-    ok: bool
-    gap: bool
-    quality: float
-    reason: str = ""
 
 
 @dataclass
@@ -122,7 +89,7 @@ class _State:
     previous: _ScanNode | None = None  # the previous scan (same fields as a keyframe)
     last_registered: _ScanNode | None = None  # the last scan that was not a gap
     velocity: Velocity | None = None
-    results: list[OdometryResult] = field(default_factory=list)
+    history: ResultHistory = field(default_factory=ResultHistory)
 
 
 class Odometry:
@@ -143,29 +110,31 @@ class Odometry:
     # -- results ------------------------------------------------------------------------------
     @property
     def results(self) -> list[OdometryResult]:
-        """One result per registered scan, in order."""
-        return list(self._state.results)
+        """One result per registered scan, in order: each scan's pose revised once the next
+        scan has registered (the last one is as `register` returned it; see
+        `odometry.history`)."""
+        return self._state.history.results
 
     @property
     def poses(self) -> FloatArray:
-        """(N, 3) T_world_radar of every registered scan."""
-        return np.array([r.pose for r in self._state.results]).reshape(-1, 3)
+        """(N, 3) T_world_radar of every registered scan (as in `results`)."""
+        return np.array([r.pose for r in self.results]).reshape(-1, 3)
 
     @property
     def timestamps_ns(self) -> NDArray[np.int64]:
         """(N,) reference times of the registered scans [ns]."""
-        return np.array([r.timestamp_ns for r in self._state.results], dtype=np.int64)
+        return np.array([r.timestamp_ns for r in self.results], dtype=np.int64)
 
     @property
     def gaps(self) -> list[int]:
         """Indices of the scans whose pose is a constant-velocity prediction."""
-        return [r.index for r in self._state.results if r.gap]
+        return [r.index for r in self.results if r.gap]
 
     @property
     def longest_gap_run(self) -> int:
         """The most consecutive gaps so far (more than 2 on driven data is a defect)."""
         best = run = 0
-        for result in self._state.results:
+        for result in self.results:
             run = run + 1 if result.gap else 0
             best = max(best, run)
         return best
@@ -173,7 +142,7 @@ class Odometry:
     @property
     def keyframes(self) -> list[int]:
         """Indices of the scans that became keyframes."""
-        return [r.index for r in self._state.results if r.is_keyframe]
+        return [r.index for r in self.results if r.is_keyframe]
 
     @property
     def velocity(self) -> FloatArray | None:
@@ -189,13 +158,14 @@ class Odometry:
 
     # -- the per-frame step -------------------------------------------------------------------
     def register(self, frame: Scan) -> OdometryResult:
-        """Register the next scan; returns its pose and how it was obtained.
+        """Register the next scan; returns its prompt result: its pose and how it was obtained,
+        `motion` from the previous scan's prompt pose (so that the returned results chain).
 
         Raises:
             OdometryError: the scan is malformed or not later than the previous one.
         """
         state = self._state
-        index = len(state.results)
+        index = len(state.history)
         scan = self._prepare(frame)
         previous = state.previous
         if state.keyframe is None or previous is None:
@@ -339,7 +309,10 @@ class Odometry:
         )
         scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
         image_pose = compose(reference.image_pose, estimate.motion)
+        before = state.velocity
         change = self._update_velocity(base, scan, image_pose, interval_s)
+        if before is not None and base is previous and not previous.gap:
+            self._revise(previous, before)
         pose = self._reference_pose(image_pose, scan)
         node = _ScanNode(
             index=index,
@@ -450,9 +423,21 @@ class Odometry:
         """T_world_radar at the scan's reference time from its image pose, with the velocity
         expected between the two times."""
         assert self._state.velocity is not None
-        centre_ns = (_image_time_ns(scan) + scan.timestamp_ns) // 2
-        twist = self._velocity_at(centre_ns)
-        return compose(image_pose, inverse(motion_from_twist(twist, scan.image_time_s)))
+        twist = self._velocity_at(_move_centre_ns(scan))
+        return pose_at_reference(image_pose, twist, scan.image_time_s)
+
+    def _revise(self, node: _ScanNode, before: Velocity) -> None:
+        """Revise the previous scan's pose in the history now that the velocity after its image
+        time is measured too (`before` was measured up to it; see `odometry.reference_time`)."""
+        after = self._state.velocity
+        if not self.config.deskew.revise_reference_pose or after is None or node.index == 0:
+            return
+        twist = bounded_twist(
+            interpolated_twist(before, after, _move_centre_ns(node.scan)), self.config
+        )
+        self._state.history.revise(
+            node.index, pose_at_reference(node.image_pose, twist, node.scan.image_time_s)
+        )
 
     def _needs_keyframe(self, estimate: MotionEstimate, keyframe: _ScanNode) -> bool:
         kcfg = self.config.keyframe
@@ -558,7 +543,7 @@ class Odometry:
             quality=float(quality),
             reason=reason,
         )
-        self._state.results.append(result)
+        self._state.history.append(result)
         return result
 
 
@@ -574,6 +559,11 @@ def _ns(seconds: float) -> int:
 def _image_time_ns(scan: PreparedScan) -> int:
     """Absolute time of a scan's image frame [ns]."""
     return scan.timestamp_ns + _ns(scan.image_time_s)
+
+
+def _move_centre_ns(scan: PreparedScan) -> int:
+    """The middle of the move from a scan's image time to its reference time [ns]."""
+    return (_image_time_ns(scan) + scan.timestamp_ns) // 2
 
 
 def _factor_covariance(

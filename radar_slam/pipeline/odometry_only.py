@@ -38,14 +38,14 @@ def run_odometry(
     frames = frame_count(sequence, max_frames)
     odometry = Odometry(config.odometry)
     start = time.perf_counter()
-    results = []
     depth = config.concurrency.read_ahead_scans
     with ScanReader(LockedReader(sequence), frames, depth) as reader:
         for index in range(frames):
-            results.append(odometry.register(reader.next()))
+            odometry.register(reader.next())
             if progress is not None:
                 progress(Progress(index + 1, frames, 0, 0, time.perf_counter() - start))
     seconds = time.perf_counter() - start
+    results = odometry.results  # each pose revised once the next scan registered
     stamps = np.array([r.timestamp_ns for r in results], dtype=np.int64)
     trajectory = Trajectory(stamps, np.array([r.pose for r in results]).reshape(-1, 3))
     _, gt = ground_truth_of(sequence, frames)

@@ -1,0 +1,38 @@
+"""A scan's pose at its reference time from the pose of its de-skewed image (mid-sweep).
+
+Registrations chain image poses (`registration.PreparedScan`); the pose a user sees is at the
+scan's reference time, the image pose moved by the body velocity over the time between them.
+Once the scan after it has registered, the velocities measured on both sides of that move are
+known (previous image pose -> this one, this one -> next), each the mean over its interval;
+interpolating them linearly in time to the middle of the move is the yaw of a quadratic through
+the three image poses, which follows a yaw-rate reversal that the velocity measured up to the
+scan (with or without its trend) cannot.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry.deskew import motion_from_twist
+from odometry.velocity import Velocity
+from raplace.se2 import compose, inverse
+
+FloatArray = NDArray[np.float64]
+
+
+def pose_at_reference(image_pose: FloatArray, twist: FloatArray, image_time_s: float) -> FloatArray:
+    """(3,) T_world_radar at the reference time of a scan whose image frame is at `image_pose`
+    (world) `image_time_s` [s] from the reference time (negative: before it), moving at `twist`
+    (vx, vy [m/s], yaw rate [rad/s]) between the two."""
+    return compose(image_pose, inverse(motion_from_twist(twist, image_time_s)))
+
+
+def interpolated_twist(before: Velocity, after: Velocity, time_ns: int) -> FloatArray:
+    """(3,) twist at `time_ns`, linear in time between two measured velocities (each at the
+    middle of its interval, `time_ns` of each), held constant outside them."""
+    span_ns = after.time_ns - before.time_ns
+    if span_ns <= 0:
+        return np.asarray(after.twist, dtype=np.float64).copy()
+    fraction = float(np.clip((time_ns - before.time_ns) / span_ns, 0.0, 1.0))
+    return np.asarray((1.0 - fraction) * before.twist + fraction * after.twist, dtype=np.float64)

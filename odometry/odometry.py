@@ -44,6 +44,12 @@ from odometry import OdometryError
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.preprocess import preprocess_polar
+from odometry.recovery import (
+    fallback_references,
+    plausible_twist,
+    preferred,
+    remembered_keyframes,
+)
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.uncertainty import conversion_covariance, unseen_covariance
@@ -121,6 +127,7 @@ class _State:
     keyframe: _ScanNode | None = None
     previous: _ScanNode | None = None  # the previous scan (same fields as a keyframe)
     last_registered: _ScanNode | None = None  # the last scan that was not a gap
+    earlier_keyframes: list[_ScanNode] = field(default_factory=list)  # most recent first
     velocity: Velocity | None = None
     results: list[OdometryResult] = field(default_factory=list)
 
@@ -256,30 +263,36 @@ class Odometry:
         )
 
     def _references(self) -> list[_ScanNode]:
-        """Scans to register against, in order: the keyframe, the last registered scan, the
-        previous scan (a gap's image is real, only its pose is predicted)."""
+        """Scans to register against, in order (`recovery.fallback_references`)."""
         state = self._state
-        nodes = [state.keyframe, state.last_registered, state.previous]
-        return list({id(n): n for n in nodes if n is not None}.values())
+        return fallback_references(
+            state.keyframe, state.last_registered, state.earlier_keyframes, state.previous
+        )
 
     def _search(
         self, index: int, scan: PreparedScan, predicted: FloatArray | None
     ) -> tuple[_ScanNode | None, MotionEstimate]:
         """The first reference `scan` registers against and the estimate (None and the last
         failed estimate when none does)."""
-        estimate = None
+        estimate, found, implausible = None, None, None
         for reference in self._references():
             estimate = self._registered(reference, scan, predicted)
             if estimate.ok:
-                return reference, estimate
+                found = (reference, estimate)
+                break
             logger.info(
                 "scan %d: registration against scan %d failed (%s)",
                 index,
                 reference.index,
                 estimate.reason,
             )
+            if estimate.implausible and (
+                implausible is None or estimate.quality > implausible[1].quality
+            ):
+                implausible = (reference, estimate)
         assert estimate is not None
-        return None, estimate
+        chosen = preferred(found, implausible)
+        return (None, estimate) if chosen is None else chosen
 
     def _registered(
         self, reference: _ScanNode, scan: PreparedScan, predicted: FloatArray | None
@@ -295,7 +308,8 @@ class Odometry:
         if estimate.ok and self._agrees(estimate.motion, expected):
             return estimate
         seeded = register_images(reference.scan, scan, cfg, hint=expected)
-        if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
+        strong = estimate.ok or estimate.implausible  # the images support it
+        if seeded.ok and (not strong or seeded.quality > estimate.quality):
             logger.debug(
                 "scan against %d: seeded estimate %s (quality %.1f) beats %s (%.1f%s)",
                 reference.index,
@@ -337,9 +351,18 @@ class Odometry:
         interval_s = _image_interval_s(
             base, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
-        scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
-        image_pose = compose(reference.image_pose, estimate.motion)
-        change = self._update_velocity(base, scan, image_pose, interval_s)
+        image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
+        # A motion faster than a vehicle moves, or across a gap that hid more than the
+        # prediction allows, is no velocity: the one from before is kept (recovery.py).
+        measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
+        predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
+        smooth = predicted is None or self._agrees(between(predicted, image_pose), np.zeros(3))
+        if state.velocity is None or (smooth and plausible_twist(measured, self.config)):
+            scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
+            image_pose = compose(reference.image_pose, estimate.motion)
+            change = self._update_velocity(base, scan, image_pose, interval_s)
+        else:
+            logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
         node = _ScanNode(
             index=index,
@@ -364,6 +387,9 @@ class Odometry:
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
             node.scan = self._refreshed(node.scan)
+            state.earlier_keyframes = remembered_keyframes(
+                state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
+            )
             state.keyframe = node
         else:
             keyframe.frames += 1

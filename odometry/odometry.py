@@ -25,11 +25,12 @@ a veto. When the global estimate fails or disagrees with the prediction, the sca
 again seeded with the prediction, and the stronger correlation wins: the images decide. A strong
 registration therefore ends any run of failures at once, whatever the motion model expected.
 
-When the keyframe cannot be registered, the last registered scan and then the previous scan are
-tried (the reference becomes the new keyframe); if all fail, the pose comes from the
-constant-velocity prediction, the result says so (`ok=False`, `gap=True`, a large covariance),
-and the keyframe stays, so the next scan tries it first, again with a global search. The motion
-is never silently set to zero.
+When the keyframe cannot be registered, the last registered scan, the earlier keyframes, then
+the previous scan are tried (the reference becomes the keyframe); if all fail, the pose is the
+constant-velocity prediction, flagged (`ok=False`, `gap=True`, a large covariance), and the
+keyframe stays, so the next scan tries it first, again globally. A scan the motion model cannot
+describe stays a local error (`recovery`): a motion faster than a vehicle moves is no velocity,
+and a strong registration the kinematic limits reject beats a weaker one or a gap.
 """
 
 from __future__ import annotations
@@ -40,16 +41,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError
+from odometry import OdometryError, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.preprocess import preprocess_polar
-from odometry.recovery import (
-    fallback_references,
-    plausible_twist,
-    preferred,
-    remembered_keyframes,
-)
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.uncertainty import conversion_covariance, unseen_covariance
@@ -60,7 +55,7 @@ from odometry.velocity import (
     bounded_twist,
     close_twists,
 )
-from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
+from raplace.se2 import between, compose, inverse, rotate_covariance
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
@@ -265,20 +260,20 @@ class Odometry:
     def _references(self) -> list[_ScanNode]:
         """Scans to register against, in order (`recovery.fallback_references`)."""
         state = self._state
-        return fallback_references(
+        return recovery.fallback_references(
             state.keyframe, state.last_registered, state.earlier_keyframes, state.previous
         )
 
     def _search(
         self, index: int, scan: PreparedScan, predicted: FloatArray | None
     ) -> tuple[_ScanNode | None, MotionEstimate]:
-        """The first reference `scan` registers against and the estimate (None and the last
-        failed estimate when none does)."""
-        estimate, found, implausible = None, None, None
+        """The reference `scan` registers against and the estimate (`recovery.chosen`; None
+        and the last failed estimate when none does)."""
+        tried = []
         for reference in self._references():
             estimate = self._registered(reference, scan, predicted)
+            tried.append((reference, estimate))
             if estimate.ok:
-                found = (reference, estimate)
                 break
             logger.info(
                 "scan %d: registration against scan %d failed (%s)",
@@ -286,13 +281,7 @@ class Odometry:
                 reference.index,
                 estimate.reason,
             )
-            if estimate.implausible and (
-                implausible is None or estimate.quality > implausible[1].quality
-            ):
-                implausible = (reference, estimate)
-        assert estimate is not None
-        chosen = preferred(found, implausible)
-        return (None, estimate) if chosen is None else chosen
+        return recovery.chosen(tried)
 
     def _registered(
         self, reference: _ScanNode, scan: PreparedScan, predicted: FloatArray | None
@@ -305,7 +294,7 @@ class Odometry:
         if predicted is None:
             return estimate
         expected = between(reference.image_pose, predicted)
-        if estimate.ok and self._agrees(estimate.motion, expected):
+        if estimate.ok and recovery.agrees(estimate.motion, expected, self.config):
             return estimate
         seeded = register_images(reference.scan, scan, cfg, hint=expected)
         strong = estimate.ok or estimate.implausible  # the images support it
@@ -321,15 +310,6 @@ class Odometry:
             )
             return seeded
         return estimate
-
-    def _agrees(self, motion: FloatArray, expected: FloatArray) -> bool:
-        """`motion` is within the prediction tolerances of `expected`."""
-        qcfg = self.config.quality
-        off = motion - expected
-        return bool(
-            np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m
-            and abs(wrap_angle(float(off[2]))) <= np.deg2rad(qcfg.max_prediction_error_deg)
-        )
 
     def _accept(
         self,
@@ -356,8 +336,8 @@ class Odometry:
         # prediction allows, is no velocity: the one from before is kept (recovery.py).
         measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
-        smooth = predicted is None or self._agrees(between(predicted, image_pose), np.zeros(3))
-        if state.velocity is None or (smooth and plausible_twist(measured, self.config)):
+        smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
+        if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
             scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
             image_pose = compose(reference.image_pose, estimate.motion)
             change = self._update_velocity(base, scan, image_pose, interval_s)
@@ -387,7 +367,7 @@ class Odometry:
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
             node.scan = self._refreshed(node.scan)
-            state.earlier_keyframes = remembered_keyframes(
+            state.earlier_keyframes = recovery.remembered_keyframes(
                 state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
             )
             state.keyframe = node

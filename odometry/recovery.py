@@ -32,9 +32,21 @@ from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
 from odometry.registration import MotionEstimate
+from raplace.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
 Node = TypeVar("Node")
+
+
+def agrees(motion: FloatArray, expected: FloatArray, cfg: OdometryConfig) -> bool:
+    """`motion` (3,) is within the prediction tolerances (`QualityConfig.max_prediction_error_m`,
+    `max_prediction_error_deg`) of `expected` (3,); poses or motions in one frame."""
+    qcfg = cfg.quality
+    off = np.asarray(motion, dtype=np.float64) - np.asarray(expected, dtype=np.float64)
+    return bool(
+        np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m
+        and abs(wrap_angle(float(off[2]))) <= np.deg2rad(qcfg.max_prediction_error_deg)
+    )
 
 
 def plausible_twist(twist: FloatArray, cfg: OdometryConfig) -> bool:
@@ -65,6 +77,20 @@ def remembered_keyframes(
     """The earlier keyframes after `replaced` stops being the keyframe (most recent first, at
     most `count`)."""
     return [replaced, *earlier_keyframes][:count]
+
+
+def chosen(
+    tried: Sequence[tuple[Node, MotionEstimate]],
+) -> tuple[Node | None, MotionEstimate]:
+    """The registration to use among those `tried` (in order; only the last may be ok): the
+    one that passed every check, unless one that failed only for its speed or yaw rate
+    (`MotionEstimate.implausible`) correlates more strongly, which is then returned marked ok;
+    (None, the last estimate) when none is usable."""
+    found = tried[-1] if tried[-1][1].ok else None
+    candidates = [t for t in tried if t[1].implausible]
+    strongest = max(candidates, key=lambda t: t[1].quality) if candidates else None
+    result = preferred(found, strongest)
+    return (None, tried[-1][1]) if result is None else result
 
 
 def preferred(

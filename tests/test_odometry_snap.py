@@ -18,7 +18,7 @@ from test_odometry_recovery import drive, errors, run, tiny_scene  # noqa: F401
 
 from odometry.config import OdometryConfig
 from odometry.odometry import Odometry
-from odometry.recovery import fallback_references, plausible_twist, preferred
+from odometry.recovery import agrees, chosen, fallback_references, plausible_twist
 from odometry.registration import MotionEstimate
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.sim.generate import Scene
@@ -83,18 +83,30 @@ def estimate(quality: float, ok: bool, implausible: bool) -> MotionEstimate:
 
 
 @pytest.mark.parametrize(
-    ("found_quality", "strong_quality", "expect"),
-    [(None, 40.0, "strong"), (20.0, 40.0, "strong"), (60.0, 40.0, "found"), (20.0, None, "found")],
+    ("tried", "expect"),
+    [
+        ([(40.0, False, True)], 0),  # nothing else registers: the strong one, not a gap
+        ([(40.0, False, True), (20.0, True, False)], 0),  # stronger than the plausible one
+        ([(40.0, False, True), (60.0, True, False)], 1),
+        ([(5.0, False, False), (20.0, True, False)], 1),
+        ([(5.0, False, False)], None),
+    ],
 )
 def test_the_stronger_correlation_decides(
-    found_quality: float | None, strong_quality: float | None, expect: str
+    tried: list[tuple[float, bool, bool]], expect: int | None
 ) -> None:
     """A registration the images support but the kinematic limits reject wins over a weaker
     plausible one (or over a gap), and is handed back marked ok."""
-    found = None if found_quality is None else ("found", estimate(found_quality, True, False))
-    strong = None if strong_quality is None else ("strong", estimate(strong_quality, False, True))
-    chosen = preferred(found, strong)
-    assert chosen is not None and chosen[0] == expect and chosen[1].ok
+    reference, chosen_estimate = chosen([(k, estimate(*t)) for k, t in enumerate(tried)])
+    assert reference == expect
+    assert chosen_estimate.ok == (expect is not None)
+
+
+def test_agreement_with_the_prediction() -> None:
+    config = OdometryConfig()
+    assert agrees(np.array([10.0, 1.0, 0.05]), np.array([9.0, 0.5, 0.0]), config)
+    assert not agrees(np.array([10.0, 1.0, 0.0]), np.array([8.0, 1.0, 0.0]), config)
+    assert agrees(np.array([0.0, 0.0, np.pi - 0.01]), np.array([0.0, 0.0, -np.pi]), config)
 
 
 def test_earlier_keyframes_come_before_a_gap_scan() -> None:

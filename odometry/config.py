@@ -239,18 +239,23 @@ class KeyframeConfig:
         max_rotation_deg: rotation from the keyframe [deg].
         min_peak_quality: peak quality below which the keyframe is renewed (overlap fading).
         max_frames: at most this many frames are registered against one keyframe.
+        fallback_keyframes: when the keyframe and the last registered scan cannot be
+            registered, this many earlier keyframes are tried before the previous scan (a
+            gap's pose is only a prediction; see `odometry.recovery`).
     """
 
     max_translation_m: float = 5.0
     max_rotation_deg: float = 10.0
     min_peak_quality: float = 12.0
     max_frames: int = 8
+    fallback_keyframes: int = 2
 
     def __post_init__(self) -> None:
         checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
         checks.positive("max_rotation_deg", self.max_rotation_deg, allow_inf=True)
         checks.non_negative("min_peak_quality", self.min_peak_quality)
         checks.at_least("max_frames", self.max_frames, 1)
+        checks.at_least("fallback_keyframes", self.fallback_keyframes, 0)
 
 
 @dataclass(frozen=True)

@@ -28,11 +28,12 @@ a veto. When the global estimate fails or disagrees with the prediction, the sca
 again seeded with the prediction, and the stronger correlation wins: the images decide. A strong
 registration therefore ends any run of failures at once, whatever the motion model expected.
 
-When the keyframe cannot be registered, the last registered scan and then the previous scan are
-tried (the reference becomes the new keyframe); if all fail, the pose comes from the
-constant-velocity prediction, the result says so (`ok=False`, `gap=True`, a large covariance),
-and the keyframe stays, so the next scan tries it first, again with a global search. The motion
-is never silently set to zero.
+When the keyframe cannot be registered, the last registered scan, the earlier keyframes, then
+the previous scan are tried (the reference becomes the keyframe); if all fail, the pose is the
+constant-velocity prediction, flagged (`ok=False`, `gap=True`, a large covariance), and the
+keyframe stays, so the next scan tries it first, again globally. A scan the motion model cannot
+describe stays a local error (`recovery`): a motion faster than a vehicle moves is no velocity,
+and a strong registration the kinematic limits reject beats a weaker one or a gap.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError
+from odometry import OdometryError, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.history import OdometryResult, ResultHistory
@@ -59,7 +60,7 @@ from odometry.velocity import (
     bounded_twist,
     close_twists,
 )
-from raplace.se2 import between, compose, rotate_covariance, wrap_angle
+from raplace.se2 import between, compose, rotate_covariance
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
@@ -88,6 +89,7 @@ class _State:
     keyframe: _ScanNode | None = None
     previous: _ScanNode | None = None  # the previous scan (same fields as a keyframe)
     last_registered: _ScanNode | None = None  # the last scan that was not a gap
+    earlier_keyframes: list[_ScanNode] = field(default_factory=list)  # most recent first
     velocity: Velocity | None = None
     history: ResultHistory = field(default_factory=ResultHistory)
 
@@ -226,30 +228,30 @@ class Odometry:
         )
 
     def _references(self) -> list[_ScanNode]:
-        """Scans to register against, in order: the keyframe, the last registered scan, the
-        previous scan (a gap's image is real, only its pose is predicted)."""
+        """Scans to register against, in order (`recovery.fallback_references`)."""
         state = self._state
-        nodes = [state.keyframe, state.last_registered, state.previous]
-        return list({id(n): n for n in nodes if n is not None}.values())
+        return recovery.fallback_references(
+            state.keyframe, state.last_registered, state.earlier_keyframes, state.previous
+        )
 
     def _search(
         self, index: int, scan: PreparedScan, predicted: FloatArray | None
     ) -> tuple[_ScanNode | None, MotionEstimate]:
-        """The first reference `scan` registers against and the estimate (None and the last
-        failed estimate when none does)."""
-        estimate = None
+        """The reference `scan` registers against and the estimate (`recovery.chosen`; None
+        and the last failed estimate when none does)."""
+        tried = []
         for reference in self._references():
             estimate = self._registered(reference, scan, predicted)
+            tried.append((reference, estimate))
             if estimate.ok:
-                return reference, estimate
+                break
             logger.info(
                 "scan %d: registration against scan %d failed (%s)",
                 index,
                 reference.index,
                 estimate.reason,
             )
-        assert estimate is not None
-        return None, estimate
+        return recovery.chosen(tried)
 
     def _registered(
         self, reference: _ScanNode, scan: PreparedScan, predicted: FloatArray | None
@@ -262,10 +264,11 @@ class Odometry:
         if predicted is None:
             return estimate
         expected = between(reference.image_pose, predicted)
-        if estimate.ok and self._agrees(estimate.motion, expected):
+        if estimate.ok and recovery.agrees(estimate.motion, expected, self.config):
             return estimate
         seeded = register_images(reference.scan, scan, cfg, hint=expected)
-        if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
+        strong = estimate.ok or estimate.implausible  # the images support it
+        if seeded.ok and (not strong or seeded.quality > estimate.quality):
             logger.debug(
                 "scan against %d: seeded estimate %s (quality %.1f) beats %s (%.1f%s)",
                 reference.index,
@@ -277,15 +280,6 @@ class Odometry:
             )
             return seeded
         return estimate
-
-    def _agrees(self, motion: FloatArray, expected: FloatArray) -> bool:
-        """`motion` is within the prediction tolerances of `expected`."""
-        qcfg = self.config.quality
-        off = motion - expected
-        return bool(
-            np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m
-            and abs(wrap_angle(float(off[2]))) <= np.deg2rad(qcfg.max_prediction_error_deg)
-        )
 
     def _accept(
         self,
@@ -307,12 +301,21 @@ class Odometry:
         interval_s = _image_interval_s(
             base, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
-        scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
-        image_pose = compose(reference.image_pose, estimate.motion)
-        before = state.velocity
-        change = self._update_velocity(base, scan, image_pose, interval_s)
-        if before is not None and base is previous and not previous.gap:
-            self._revise(previous, before)
+        image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
+        # A motion faster than a vehicle moves, or across a gap that hid more than the
+        # prediction allows, is no velocity: the one from before is kept (recovery.py).
+        measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
+        predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
+        smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
+        if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
+            scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
+            image_pose = compose(reference.image_pose, estimate.motion)
+            before = state.velocity
+            change = self._update_velocity(base, scan, image_pose, interval_s)
+            if before is not None and base is previous and not previous.gap:
+                self._revise(previous, before)
+        else:
+            logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
         node = _ScanNode(
             index=index,
@@ -337,6 +340,9 @@ class Odometry:
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
             node.scan = self._refreshed(node.scan)
+            state.earlier_keyframes = recovery.remembered_keyframes(
+                state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
+            )
             state.keyframe = node
         else:
             keyframe.frames += 1

@@ -79,6 +79,8 @@ class MotionEstimate:
         ok: True when every check passed; a caller must not use `motion` when False.
         reason: why the estimate failed ("" when ok).
         coarse_motion: (3,) the coarse level's estimate (for diagnostics).
+        implausible: failed only for being faster than the vehicle can move (every image check
+            passed): a caller may still prefer it to a weaker registration (`Odometry`).
     """
 
     motion: FloatArray
@@ -88,6 +90,7 @@ class MotionEstimate:
     ok: bool
     reason: str = ""
     coarse_motion: FloatArray = field(default_factory=lambda: np.zeros(3))
+    implausible: bool = False
 
     @property
     def dx(self) -> float:
@@ -273,7 +276,11 @@ def register_images(
     translation = _peak_to_metres(peak, cell)
     motion = np.array([translation[0], translation[1], yaw])
     dt_s = (cur.timestamp_ns - ref.timestamp_ns) / NS_PER_S
-    reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, dt_s, cfg)
+    reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, cfg)
+    implausible = False
+    if not reason:
+        reason = _kinematic_reason(motion, dt_s, cfg)
+        implausible = bool(reason)
     if reason:
         logger.debug("registration failed: %s (motion %s)", reason, motion)
     return MotionEstimate(
@@ -284,6 +291,7 @@ def register_images(
         ok=not reason,
         reason=reason,
         coarse_motion=coarse_motion,
+        implausible=implausible,
     )
 
 
@@ -360,13 +368,11 @@ def _failure_reason(
     peak: Peak,
     t_coarse: FloatArray,
     motion: FloatArray,
-    dt_s: float,
     cfg: OdometryConfig,
 ) -> str:
-    """Why a registration is not to be trusted ("" when every check passes): empty scans, weak
-    peaks, coarse/fine disagreement, or a motion faster than the vehicle can move in `dt_s`."""
+    """Why the images do not support a registration ("" when every check passes): empty scans,
+    weak peaks, coarse/fine disagreement."""
     qcfg = cfg.quality
-    distance = float(np.hypot(motion[0], motion[1]))
     if ref.empty or cur.empty:
         return "a scan is empty after conditioning"
     if rotation.quality < qcfg.min_peak_quality:
@@ -375,6 +381,13 @@ def _failure_reason(
         return f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
     if np.hypot(*(motion[:2] - t_coarse)) > qcfg.max_coarse_fine_disagreement_m:
         return f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
+    return ""
+
+
+def _kinematic_reason(motion: FloatArray, dt_s: float, cfg: OdometryConfig) -> str:
+    """Why `motion` over `dt_s` [s] is faster than the vehicle can move ("" when it is not)."""
+    qcfg = cfg.quality
+    distance = float(np.hypot(motion[0], motion[1]))
     if dt_s > 0 and distance / dt_s > qcfg.max_speed_mps:
         return f"implausible speed {distance / dt_s:.1f} m/s"
     if dt_s > 0 and np.rad2deg(abs(motion[2])) / dt_s > qcfg.max_yaw_rate_dps:

@@ -1,0 +1,105 @@
+"""What the odometry trusts after a scan it could not describe: pure helpers of `Odometry`.
+
+A scan whose sweep holds a motion no vehicle makes (a heading snap, a registration that is
+wrong but passes its checks) must not pass its error on. Two rules keep it local:
+
+- `plausible_twist`: a twist measured between two image poses that is faster than the vehicle
+  can move (`QualityConfig.max_speed_mps`, `max_yaw_rate_dps`) is not a vehicle motion: one of
+  the two poses is wrong or the motion was not smooth. Nor is the mean twist across a gap when
+  the scan after it lands off the constant-velocity prediction (`Odometry` checks that with the
+  prediction tolerances): the gap hid a motion the model cannot describe. Neither becomes the
+  running velocity nor re-renders the scan (a de-skew at the clamped 120 deg/s bends an image by
+  +-15 deg, and moving a pose from mid-sweep to the end of the sweep turns it by 15 deg); the
+  velocity from before is kept until two registered scans in a row measure it again.
+- `preferred`: a registration whose images pass every check but whose motion is faster than
+  the vehicle can move (`MotionEstimate.implausible`) is kept when it correlates more strongly
+  than every plausible one (or when none registers): a prior is a hint, never a veto, and the
+  images decide; its motion is then not taken as the velocity (above).
+- `fallback_references`: when the keyframe cannot be registered (it may itself be such a scan),
+  the earlier keyframes are tried before a gap scan, whose pose is only a prediction: a scan
+  that registers against an older keyframe ends the gap with a measured pose instead of
+  chaining onto the predicted one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry.config import OdometryConfig
+from odometry.registration import MotionEstimate
+from raplace.se2 import wrap_angle
+
+FloatArray = NDArray[np.float64]
+Node = TypeVar("Node")
+
+
+def agrees(motion: FloatArray, expected: FloatArray, cfg: OdometryConfig) -> bool:
+    """`motion` (3,) is within the prediction tolerances (`QualityConfig.max_prediction_error_m`,
+    `max_prediction_error_deg`) of `expected` (3,); poses or motions in one frame."""
+    qcfg = cfg.quality
+    off = np.asarray(motion, dtype=np.float64) - np.asarray(expected, dtype=np.float64)
+    return bool(
+        np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m
+        and abs(wrap_angle(float(off[2]))) <= np.deg2rad(qcfg.max_prediction_error_deg)
+    )
+
+
+def plausible_twist(twist: FloatArray, cfg: OdometryConfig) -> bool:
+    """`twist` (vx, vy [m/s], yaw rate [rad/s]) is within the plausible speed and yaw rate."""
+    qcfg = cfg.quality
+    return bool(
+        np.hypot(twist[0], twist[1]) <= qcfg.max_speed_mps
+        and abs(twist[2]) <= np.deg2rad(qcfg.max_yaw_rate_dps)
+    )
+
+
+def fallback_references(
+    keyframe: Node | None,
+    last_registered: Node | None,
+    earlier_keyframes: Sequence[Node],
+    previous: Node | None,
+) -> list[Node]:
+    """Scans to register a new scan against, in order and without repeats: the keyframe, the
+    last registered scan, the earlier keyframes (most recent first), the previous scan (a gap's
+    image is real, only its pose is predicted: the last resort)."""
+    nodes = [keyframe, last_registered, *earlier_keyframes, previous]
+    return list({id(n): n for n in nodes if n is not None}.values())
+
+
+def remembered_keyframes(
+    earlier_keyframes: Sequence[Node], replaced: Node, count: int
+) -> list[Node]:
+    """The earlier keyframes after `replaced` stops being the keyframe (most recent first, at
+    most `count`)."""
+    return [replaced, *earlier_keyframes][:count]
+
+
+def chosen(
+    tried: Sequence[tuple[Node, MotionEstimate]],
+) -> tuple[Node | None, MotionEstimate]:
+    """The registration to use among those `tried` (in order; only the last may be ok): the
+    one that passed every check, unless one that failed only for its speed or yaw rate
+    (`MotionEstimate.implausible`) correlates more strongly, which is then returned marked ok;
+    (None, the last estimate) when none is usable."""
+    found = tried[-1] if tried[-1][1].ok else None
+    candidates = [t for t in tried if t[1].implausible]
+    strongest = max(candidates, key=lambda t: t[1].quality) if candidates else None
+    result = preferred(found, strongest)
+    return (None, tried[-1][1]) if result is None else result
+
+
+def preferred(
+    found: tuple[Node, MotionEstimate] | None, implausible: tuple[Node, MotionEstimate] | None
+) -> tuple[Node, MotionEstimate] | None:
+    """The registration to use: `found` (the first that passed every check, or None), unless
+    `implausible` (the strongest that failed only for its speed or yaw rate) correlates more
+    strongly, which is then returned marked ok."""
+    if implausible is None or (found is not None and found[1].quality >= implausible[1].quality):
+        return found
+    reference, estimate = implausible
+    return reference, dataclasses.replace(estimate, ok=True, reason="", implausible=False)

@@ -122,6 +122,10 @@ class GeometricVerifier:
     of one query conditions the query scan once, and the pose spectra of recent database scans
     (by key and time, within `cfg.pose_image_cache_mb`): a scan is often a candidate of several
     queries.
+
+    A caller that has already conditioned a scan for registration (the pipeline's odometry)
+    hands it over with `offer` before the detector sees the scan; the query is then not
+    conditioned again (see `offer`). At most one offered scan is kept.
     """
 
     def __init__(self, cfg: LoopClosureConfig) -> None:
@@ -133,6 +137,21 @@ class GeometricVerifier:
         self._query_key: int | None = None
         self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
+        self._offered: tuple[int, PreparedScan] | None = None
+        self.reused = 0
+        """Queries whose offered conditioned scan was used (a count, for benchmarks)."""
+
+    def offer(self, key: int, prepared: PreparedScan) -> None:
+        """Hand over scan `key`'s conditioned form (`odometry.Odometry.prepared`), to be used if
+        that scan is verified as a query next (only the latest offer is kept).
+
+        Made with the refinement settings (`cfg.refinement`), it is used as it is, with the
+        spectra already made for it and the de-skew velocity it was made with (the odometry's;
+        `register` moves the estimate to the scans' reference times either way); made with the
+        same conditioning settings only, its conditioned polar scan is reused; otherwise it is
+        ignored. The object is shared with the caller: the verifier only adds cached spectra.
+        """
+        self._offered = (int(key), prepared)
 
     def _spectrum(self, scan: Scan) -> PoseSpectrum:
         image = self.pose_estimator.image(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
@@ -147,8 +166,28 @@ class GeometricVerifier:
 
     def _prepared_query(self, query: KeyScan) -> PreparedScan:
         if self._query_prepared is None:
+            self._query_prepared = self._from_offer(query)
+        if self._query_prepared is None:
             self._query_prepared = prepare(query.scan, self.cfg.refinement, query.twist)
         return self._query_prepared
+
+    def _from_offer(self, query: KeyScan) -> PreparedScan | None:
+        """The offered conditioned scan of `query` (see `offer`), or None."""
+        offered, self._offered = self._offered, None
+        if offered is None:
+            return None
+        key, prepared = offered
+        if key != query.key or prepared.timestamp_ns != int(query.timestamp_ns):
+            return None  # offered for an earlier scan
+        refinement = self.cfg.refinement
+        if prepared.cfg == refinement:
+            self.reused += 1
+            return prepared
+        if prepared.cfg.preprocess == refinement.preprocess:
+            self.reused += 1
+            twist = query.twist if refinement.deskew.enabled else None
+            return PreparedScan(prepared.polar, twist, refinement)
+        return None
 
     def _map_spectrum(self, match: KeyScan) -> PoseSpectrum:
         key = (match.key, int(match.timestamp_ns))  # a key reused for another scan misses

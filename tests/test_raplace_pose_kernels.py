@@ -77,3 +77,18 @@ def test_aligned_correlation_matches_its_numpy_formula() -> None:
     # The same rows moved by their own shift correlate perfectly.
     moved = (m * np.exp(-2j * np.pi * freqs[None, :] * shift)).astype(np.complex64)
     assert aligned_correlation(moved, m, thetas, freqs, xy) > 0.9999
+
+
+def test_image_spectrum_equals_the_shifted_padded_fft2() -> None:
+    """The spectrum made from the image's non-zero rows is fftshift(fft2(ifftshift(padded)))."""
+    rng = np.random.default_rng(4)
+    for side, pad in ((SIDE, 2), (SIDE, 1), (10, 3)):
+        cart = rng.random((side, side)).astype(np.float32)
+        size = pad * side
+        padded = np.zeros((size, size))
+        start = size // 2 - side // 2
+        padded[start : start + side, start : start + side] = cart[::-1, ::-1]
+        expected = np.fft.fftshift(np.fft.fft2(np.fft.ifftshift(padded)))
+        grid = image_spectrum(cart, CELL_M, pad).grid
+        got = grid[..., 0] + 1j * grid[..., 1]
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-5 * np.abs(expected).max())

@@ -139,6 +139,17 @@ def radial_spectrum(
     centre = spectrum.size // 2
     rows = (centre + kx * scale).astype(np.float32)
     cols = (centre + ky * scale).astype(np.float32)
+    values = sample_spectrum(spectrum, rows, cols)
+    # Pixel centres sit at (index + 0.5) * cell from the sensor: undo that half-pixel offset.
+    values *= unit_phasor(-np.pi * spectrum.cell_m * (kx + ky))
+    return values
+
+
+def sample_spectrum(
+    spectrum: ImageSpectrum, rows: NDArray[np.float32], cols: NDArray[np.float32]
+) -> NDArray[np.complex64]:
+    """The spectrum bicubically interpolated at fractional grid (rows, cols) (any equal shapes;
+    zero outside the grid), as complex64 of that shape."""
     sampled = cv2.remap(
         spectrum.grid,
         cols,
@@ -147,10 +158,7 @@ def radial_spectrum(
         borderMode=cv2.BORDER_CONSTANT,
         borderValue=0.0,
     )
-    values = np.ascontiguousarray(sampled).view(np.complex64)[..., 0]
-    # Pixel centres sit at (index + 0.5) * cell from the sensor: undo that half-pixel offset.
-    values *= unit_phasor(-np.pi * spectrum.cell_m * (kx + ky))
-    return values
+    return np.ascontiguousarray(sampled).view(np.complex64)[..., 0]
 
 
 def sinogram(

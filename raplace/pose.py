@@ -25,14 +25,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import scipy.fft
 from numpy.typing import NDArray
 
 from raplace import RaPlaceError
 from raplace.config import PoseConfig
-from raplace.descriptor import ImageSpectrum, image_spectrum
+from raplace.descriptor import ImageSpectrum, image_spectrum, sample_spectrum
 from raplace.pose_kernels import (
     aligned_correlation_kernel,
     fit_translation_kernel,
@@ -257,15 +256,7 @@ def radial_rows(
         spectrum.size,
         spectrum.cell_m,
     )
-    sampled = cv2.remap(
-        spectrum.grid,
-        cols,
-        rows,
-        interpolation=cv2.INTER_CUBIC,
-        borderMode=cv2.BORDER_CONSTANT,
-        borderValue=0.0,
-    )
-    values = np.ascontiguousarray(sampled).view(np.complex64)[..., 0]
+    values = sample_spectrum(spectrum, rows, cols)
     values *= phase
     return values
 

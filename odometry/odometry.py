@@ -154,6 +154,13 @@ class Odometry:
             return None
         return self._velocity_at(state.previous.scan.timestamp_ns)
 
+    @property
+    def prepared(self) -> PreparedScan | None:  # issue-15V: handed to loop verification
+        """The last registered scan's conditioned form with the spectra made so far (shared:
+        treat as read-only), or None before the first scan."""
+        previous = self._state.previous
+        return None if previous is None else previous.scan
+
     def reset(self) -> None:
         """Forget every scan (the next one starts again at `start_pose`)."""
         self._state = _State()

@@ -74,13 +74,36 @@ def image_spectrum(cart: NDArray, cell_m: float, pad_factor: int = 2) -> ImageSp
     if pad_factor < 1:
         raise RaPlaceError(f"pad_factor must be >= 1, got {pad_factor}")
     size = pad_factor * n
-    padded = np.zeros((size, size), dtype=np.float32)
-    start = size // 2 - n // 2
-    padded[start : start + n, start : start + n] = cart[::-1, ::-1]
-    spectrum = scipy.fft.fft2(scipy.fft.ifftshift(padded), workers=1)
-    spectrum = scipy.fft.fftshift(spectrum).astype(np.complex64, copy=False)
+    spectrum = _centred_fft2(cart[::-1, ::-1], size)
     grid = spectrum.view(np.float32).reshape(size, size, 2)
     return ImageSpectrum(grid=grid, cell_m=float(cell_m))
+
+
+def _centred_fft2(image: NDArray[np.float32], size: int) -> NDArray[np.complex64]:
+    """fftshift(fft2(ifftshift(padded))) of `image` (n, n) zero-padded at the centre of a
+    (size, size) array, computed from its n non-zero rows: a real FFT along the rows, an FFT
+    along the columns for the non-negative column frequencies, the rest by Hermitian symmetry
+    (a quarter of the full complex 2-D FFT's work, no padded copies)."""
+    n = image.shape[0]
+    q, c = n // 2, size // 2
+    # ifftshift puts the image's second half first and its first half at the end, both axes.
+    rows = np.zeros((n, size), dtype=np.float32)
+    rows[:q, :q] = image[q:, q:]
+    rows[:q, size - q :] = image[q:, :q]
+    rows[q:, :q] = image[:q, q:]
+    rows[q:, size - q :] = image[:q, :q]
+    half = np.zeros((size, c + 1), dtype=np.complex64)  # columns: frequencies 0..size/2
+    transformed = scipy.fft.rfft(rows, axis=1, workers=1)
+    half[:q] = transformed[:q]
+    half[size - q :] = transformed[q:]
+    half = scipy.fft.fft(half, axis=0, workers=1, overwrite_x=True)
+    out = np.empty((size, size), dtype=np.complex64)
+    out[:c, c:] = half[c:, :c]  # fftshift: frequency (i - c, j - c) at index (i, j)
+    out[c:, c:] = half[:c, :c]
+    # F(kx, ky) = conj F(-kx, -ky) for the negative column frequencies.
+    flipped_rows = (c - np.arange(size)) % size
+    np.conjugate(half[flipped_rows, c:0:-1], out=out[:, :c])
+    return out
 
 
 def unit_phasor(angle_rad: NDArray) -> NDArray[np.complex64]:
@@ -116,6 +139,17 @@ def radial_spectrum(
     centre = spectrum.size // 2
     rows = (centre + kx * scale).astype(np.float32)
     cols = (centre + ky * scale).astype(np.float32)
+    values = sample_spectrum(spectrum, rows, cols)
+    # Pixel centres sit at (index + 0.5) * cell from the sensor: undo that half-pixel offset.
+    values *= unit_phasor(-np.pi * spectrum.cell_m * (kx + ky))
+    return values
+
+
+def sample_spectrum(
+    spectrum: ImageSpectrum, rows: NDArray[np.float32], cols: NDArray[np.float32]
+) -> NDArray[np.complex64]:
+    """The spectrum bicubically interpolated at fractional grid (rows, cols) (any equal shapes;
+    zero outside the grid), as complex64 of that shape."""
     sampled = cv2.remap(
         spectrum.grid,
         cols,
@@ -124,10 +158,7 @@ def radial_spectrum(
         borderMode=cv2.BORDER_CONSTANT,
         borderValue=0.0,
     )
-    values = np.ascontiguousarray(sampled).view(np.complex64)[..., 0]
-    # Pixel centres sit at (index + 0.5) * cell from the sensor: undo that half-pixel offset.
-    values *= unit_phasor(-np.pi * spectrum.cell_m * (kx + ky))
-    return values
+    return np.ascontiguousarray(sampled).view(np.complex64)[..., 0]
 
 
 def sinogram(

@@ -31,9 +31,16 @@ from numpy.typing import NDArray
 
 from raplace import RaPlaceError
 from raplace.config import PoseConfig
-from raplace.descriptor import ImageSpectrum, image_spectrum, radial_spectrum, unit_phasor
+from raplace.descriptor import ImageSpectrum, image_spectrum, sample_spectrum
+from raplace.pose_kernels import (
+    aligned_correlation_kernel,
+    fit_translation_kernel,
+    radial_sampling,
+    row_peak_positions,
+    whitened_cross_power,
+)
 from raplace.preprocess import CartesianImager
-from raplace.scoring import circular_peak, parabolic_vertex
+from raplace.scoring import parabolic_vertex
 from raplace.se2 import wrap_angle
 
 WHITENING_EPS = 1e-12
@@ -161,15 +168,16 @@ def per_angle_shifts(
         whitening: exponent beta of |P|^-beta.
         upsample: correlation samples per grid step along l.
     """
-    cross = query_rows * np.conj(map_rows)
-    if whitening > 0:
-        magnitude = np.maximum(np.abs(cross), np.float32(WHITENING_EPS))
-        # sqrt is several times faster than a general power (the default whitening is 0.5).
-        cross /= np.sqrt(magnitude) if whitening == 0.5 else magnitude ** np.float32(whitening)
-    cross[:, 0] = 0.0  # DC: no shift information
+    # DC (column 0) zeroed: no shift information.
+    cross = whitened_cross_power(
+        np.asarray(query_rows, dtype=np.complex64),
+        np.asarray(map_rows, dtype=np.complex64),
+        float(whitening),
+        WHITENING_EPS,
+    )
     n_l = 2 * (query_rows.shape[1] - 1) * upsample
     corr = scipy.fft.irfft(cross, n=n_l, axis=1, workers=1)  # peaks at l = b_i
-    _, position = circular_peak(corr)
+    position = row_peak_positions(corr)
     shifts = position * (period_m / n_l)
     return np.mod(shifts + 0.5 * period_m, period_m) - 0.5 * period_m
 
@@ -190,25 +198,16 @@ def fit_translation(
     Returns:
         ((x, y) [m], truncated RMS residual [m], inlier mask (n,)).
     """
-    n = len(thetas)
-    half = n // 2
-    design = np.stack([np.cos(thetas), np.sin(thetas)], axis=1)  # (n, 2)
-    # Orthogonal pair (theta, theta + pi/2): b1 = x c + y s, b2 = -x s + y c.
-    c, s = design[:half, 0], design[:half, 1]
-    b1, b2 = shifts[:half], shifts[half : 2 * half]
-    pairs = np.stack([c * b1 - s * b2, s * b1 + c * b2], axis=1)  # (half, 2)
-    residuals = shifts[None, :] - pairs @ design.T  # (half, n)
-    cost = np.minimum(residuals**2, threshold_m**2).sum(axis=1)
-    xy = pairs[int(np.argmin(cost))]
-    for _ in range(LEAST_SQUARES_ITERATIONS):
-        inliers = np.abs(shifts - design @ xy) < threshold_m
-        if inliers.sum() < 2:
-            break
-        xy = np.linalg.lstsq(design[inliers], shifts[inliers], rcond=None)[0]
-    residual = shifts - design @ xy
-    inliers = np.abs(residual) < threshold_m
-    truncated = float(np.sqrt(np.mean(np.minimum(residual**2, threshold_m**2))))
-    return xy, truncated, inliers
+    thetas = np.asarray(thetas, dtype=np.float64)
+    # Orthogonal pair (theta, theta + pi/2): b1 = x c + y s, b2 = -x s + y c (compiled loops).
+    x, y, truncated, inliers = fit_translation_kernel(
+        np.cos(thetas),
+        np.sin(thetas),
+        np.asarray(shifts, dtype=np.float64),
+        float(threshold_m),
+        LEAST_SQUARES_ITERATIONS,
+    )
+    return np.array([x, y]), float(truncated), inliers
 
 
 def aligned_correlation(
@@ -220,20 +219,20 @@ def aligned_correlation(
 ) -> float:
     """Normalised correlation of the query image and the map image moved by (xy, yaw).
 
-    `map_rows` are already de-rotated (sampled at theta - yaw). Polar Parseval: each sample is
-    weighted by k; the DC column is excluded (mean removal). Returns a value in [-1, 1].
+    `map_rows` are already de-rotated (sampled at theta - yaw); `freqs` are k_j = j * step
+    (`pose_freqs`). Polar Parseval: each sample is weighted by k; the DC column is excluded
+    (mean removal). Returns a value in [-1, 1].
     """
-    weight = freqs[None, 1:].astype(np.float32)
-    q = query_rows[:, 1:]
-    m = map_rows[:, 1:]
-    shift = (xy[0] * np.cos(thetas) + xy[1] * np.sin(thetas))[:, None]
-    # S^_q = S^_m(theta - yaw) exp(-2 pi i k b): undo the translation phase.
-    phase = unit_phasor(2.0 * np.pi * freqs[None, 1:] * shift)
-    num = float(np.sum(weight * (q * np.conj(m) * phase).real, dtype=np.float64))
-    q_power = float(np.sum(weight * (q.real**2 + q.imag**2), dtype=np.float64))
-    m_power = float(np.sum(weight * (m.real**2 + m.imag**2), dtype=np.float64))
-    den = np.sqrt(q_power * m_power)
-    return num / den if den > 0 else 0.0
+    # S^_q = S^_m(theta - yaw) exp(-2 pi i k b): the kernel undoes the translation phase.
+    shift = xy[0] * np.cos(thetas) + xy[1] * np.sin(thetas)
+    return float(
+        aligned_correlation_kernel(
+            np.asarray(query_rows, dtype=np.complex64),
+            np.asarray(map_rows, dtype=np.complex64),
+            np.asarray(shift, dtype=np.float64),
+            float(freqs[1] - freqs[0]),
+        )
+    )
 
 
 def _solve(spectra: _Spectra, yaw: float, rows: NDArray, cfg: PoseConfig) -> _Hypothesis:
@@ -244,8 +243,26 @@ def _solve(spectra: _Spectra, yaw: float, rows: NDArray, cfg: PoseConfig) -> _Hy
     return _Hypothesis(yaw=yaw, xy=xy, residual=residual, inliers=inliers, rows=rows)
 
 
+def radial_rows(
+    spectrum: ImageSpectrum, thetas_rad: NDArray[np.float64], n_freq: int
+) -> NDArray[np.complex64]:
+    """`raplace.descriptor.radial_spectrum` at k_j = j * `spectrum.freq_step_cpm`, j < n_freq
+    (`pose_freqs`): (n_theta, n_freq) complex64, the sampling maps and the half-pixel phase
+    made in one compiled pass."""
+    rows, cols, phase = radial_sampling(
+        np.asarray(thetas_rad, dtype=np.float64),
+        spectrum.freq_step_cpm,
+        n_freq,
+        spectrum.size,
+        spectrum.cell_m,
+    )
+    values = sample_spectrum(spectrum, rows, cols)
+    values *= phase
+    return values
+
+
 def _map_rows(spectra: _Spectra, yaw: float) -> NDArray[np.complex64]:
-    return radial_spectrum(spectra.map_fft, spectra.thetas - yaw, spectra.freqs)
+    return radial_rows(spectra.map_fft, spectra.thetas - yaw, len(spectra.freqs))
 
 
 def _refine(spectra: _Spectra, best: _Hypothesis, cfg: PoseConfig) -> _Hypothesis:
@@ -289,9 +306,7 @@ def pose_spectrum(cart: NDArray, cell_m: float, cfg: PoseConfig) -> PoseSpectrum
     if cfg.n_theta < 4 or cfg.n_theta % 2:
         raise RaPlaceError(f"pose n_theta must be even and >= 4, got {cfg.n_theta}")
     fft = image_spectrum(cart, cell_m, cfg.pad_factor)
-    return PoseSpectrum(
-        fft=fft, rows=radial_spectrum(fft, pose_angles(cfg.n_theta), pose_freqs(fft))
-    )
+    return PoseSpectrum(fft=fft, rows=radial_rows(fft, pose_angles(cfg.n_theta), fft.size // 2 + 1))
 
 
 def relative_pose(

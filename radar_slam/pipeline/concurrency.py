@@ -9,7 +9,10 @@ Both keep the results independent of timing:
   for scan k when the caller reaches scan k + `lag` (waiting for the detector when it is late).
   `InlineLoopRunner` runs the detector in the caller's thread, `ThreadedLoopRunner` on a worker
   thread; with the same lag both add the same loops at the same scans, so the graph, and every
-  result, is the same. The detector needs only odometry poses, never the graph.
+  result, is the same. The detector needs only odometry poses, never the graph. A scan may come
+  with its conditioned form from the odometry (`odometry.Odometry.prepared`), which the runner
+  offers to the detector's verifier (`GeometricVerifier.offer`) just before the detector sees the
+  scan, so a query is not conditioned twice.
 
 Every reading of the sequence goes through one lock (`LockedReader`): a loader may keep a file
 open (ROS bags), and the loop detector re-reads database scans from its own thread.
@@ -27,11 +30,14 @@ from typing import Generic, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from odometry.registration import PreparedScan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.loops import LoopConstraint, LoopDecision, LoopDetectorProtocol
 from radar_slam.pipeline.steps import StepTimer
 
 T = TypeVar("T")
+Offer = Callable[[int, PreparedScan], None]
+"""Takes a scan's key and its conditioned form (`GeometricVerifier.offer`)."""
 _STOP_POLL_S = 0.1
 """How often a blocked thread checks whether it was asked to stop [s]."""
 
@@ -158,6 +164,7 @@ class InlineLoopRunner:
         self._last = LoopStep(-1, [], (0, 0), [])
         self._state: tuple[int, tuple[int, int]] = (0, (0, 0))
         self._decisions: list[LoopDecision] = []
+        self._offer = offer_of(detector)
 
     # -- what the caller sees: the state as of the last loops handed out ----------------------
     def tally(self) -> tuple[int, int]:
@@ -170,9 +177,16 @@ class InlineLoopRunner:
         return list(self._last.decisions)
 
     # -- the per-scan calls -------------------------------------------------------------------
-    def submit(self, frame: RadarFrame, pose: NDArray[np.float64], key: int) -> None:
-        """Offer a scan with its odometry pose T_world_scan (3,) to the detector."""
-        self._done.append(self._step(frame, pose, key))
+    def submit(
+        self,
+        frame: RadarFrame,
+        pose: NDArray[np.float64],
+        key: int,
+        prepared: PreparedScan | None = None,
+    ) -> None:
+        """Offer a scan with its odometry pose T_world_scan (3,) to the detector, and its
+        conditioned form (if given) to the detector's verifier."""
+        self._done.append(self._step(frame, pose, key, prepared))
 
     def due(self, key: int) -> list[LoopConstraint]:
         """The loops of the scans up to `key - lag` not handed out yet (call once per scan)."""
@@ -202,7 +216,15 @@ class InlineLoopRunner:
         self._last = self._done.popleft()
         return self._last
 
-    def _step(self, frame: RadarFrame, pose: NDArray[np.float64], key: int) -> LoopStep:
+    def _step(
+        self,
+        frame: RadarFrame,
+        pose: NDArray[np.float64],
+        key: int,
+        prepared: PreparedScan | None = None,
+    ) -> LoopStep:
+        if prepared is not None and self._offer is not None:
+            self._offer(key, prepared)
         with self.timer("loop detection"):
             loops = self.detector.add(frame, pose, key)
         tally = self.detector.tally()
@@ -223,7 +245,9 @@ class ThreadedLoopRunner(InlineLoopRunner):
 
     def __init__(self, detector: LoopDetectorProtocol, lag: int, timer: StepTimer) -> None:
         super().__init__(detector, lag, timer)
-        self._inbox: queue.Queue[tuple[RadarFrame, NDArray[np.float64], int] | None] = queue.Queue()
+        self._inbox: queue.Queue[
+            tuple[RadarFrame, NDArray[np.float64], int, PreparedScan | None] | None
+        ] = queue.Queue()
         self._outbox: queue.Queue[_Outcome[LoopStep]] = queue.Queue()
         self._submitted: deque[int] = deque()
         self._stop = threading.Event()
@@ -248,9 +272,15 @@ class ThreadedLoopRunner(InlineLoopRunner):
             if outcome.error is not None:
                 return
 
-    def submit(self, frame: RadarFrame, pose: NDArray[np.float64], key: int) -> None:
+    def submit(
+        self,
+        frame: RadarFrame,
+        pose: NDArray[np.float64],
+        key: int,
+        prepared: PreparedScan | None = None,
+    ) -> None:
         self._submitted.append(key)
-        self._inbox.put((frame, np.array(pose, dtype=np.float64), key))
+        self._inbox.put((frame, np.array(pose, dtype=np.float64), key, prepared))
 
     def due(self, key: int) -> list[LoopConstraint]:
         loops: list[LoopConstraint] = []
@@ -280,6 +310,13 @@ class ThreadedLoopRunner(InlineLoopRunner):
             step = self._outbox.get().get()
         self._last = step
         return step
+
+
+def offer_of(detector: LoopDetectorProtocol) -> Offer | None:
+    """The `offer` of the detector's verifier (`GeometricVerifier.offer`), or None when the
+    detector has no verifier that takes conditioned scans."""
+    offer = getattr(getattr(detector, "verifier", None), "offer", None)
+    return offer if callable(offer) else None
 
 
 def make_loop_runner(

@@ -131,7 +131,7 @@ class Pipeline:
                 frame = self._read(reader)
                 result = self._track(frame)
                 self._extend_graph(result)
-                self.loops.submit(frame, result.pose, result.index)
+                self.loops.submit(frame, result.pose, result.index, self.odometry.prepared)  # 15V
                 self._close_loops(self.loops.due(index), index)
                 self._report(index + 1)
                 if self.observer is not None:

@@ -21,6 +21,7 @@ from radar_slam.loops import (
     LoopCovarianceConfig,
     LoopDetector,
     NullLoopDetector,
+    ThrottleConfig,
     VerifiedLoop,
     cycle_mahalanobis,
     loop_covariance,
@@ -296,11 +297,20 @@ class InjectOnce:
         return found
 
 
-def test_detector_records_every_decision_with_a_reason(tiny: RadarSequence) -> None:
-    """A revisit: the tiny drive, then its first half again (every other scan, so the scans
-    differ from the first pass) a lap later, with ground-truth poses; one wrong candidate is
-    forced into the queries."""
-    cfg = dataclasses.replace(LoopClosureConfig(), query_spacing_m=0.0)  # every scan queries
+@dataclasses.dataclass
+class Revisit:
+    """A detector's run over `revisit_frames`."""
+
+    detector: LoopDetector
+    accepted: list
+    scans: list[tuple[int, int]]  # per key: (tiny scan index, time shift [ns])
+    wrong_key: int  # the candidate forced into one query
+
+
+def run_revisit(tiny: RadarSequence, cfg: LoopClosureConfig) -> Revisit:
+    """The tiny drive, then its first half again (every other scan, so the scans differ from
+    the first pass) a lap later, with ground-truth poses; one wrong candidate is forced into the
+    queries."""
     gt = tiny.ground_truth
     assert gt is not None
     n = len(tiny)
@@ -322,15 +332,59 @@ def test_detector_records_every_decision_with_a_reason(tiny: RadarSequence) -> N
     for key, (k, shift) in enumerate(scans):
         accepted += detector.add(frame(k, shift), gt[k], key)
     accepted += detector.finish()
-    decisions = detector.decisions
-    assert accepted and len(accepted) == sum(d.accepted for d in decisions)
+    return Revisit(detector, accepted, scans, wrong_key)
+
+
+EVERY_SCAN_QUERIES = dataclasses.replace(LoopClosureConfig(), query_spacing_m=0.0)
+
+
+@pytest.fixture(scope="module")
+def unthrottled(tiny: RadarSequence) -> Revisit:
+    """Every scan queries and is verified (no throttling)."""
+    cfg = dataclasses.replace(EVERY_SCAN_QUERIES, throttle=ThrottleConfig(closed_spacing_m=0.0))
+    return run_revisit(tiny, cfg)
+
+
+def assert_accepted_loops_true(tiny: RadarSequence, run: Revisit) -> None:
+    gt = tiny.ground_truth
+    assert gt is not None
+    decisions = run.detector.decisions
+    assert run.accepted and len(run.accepted) == sum(d.accepted for d in decisions)
     for d in decisions:
         assert d.reason and d.status in ("accepted", "rejected")
         if d.accepted:
-            assert is_true_loop(d.measurement, gt[scans[d.query_key][0]], gt[scans[d.match_key][0]])
-    forced = [d for d in decisions if d.match_key == wrong_key]
+            q, m = run.scans[d.query_key][0], run.scans[d.match_key][0]
+            assert is_true_loop(d.measurement, gt[q], gt[m])
+
+
+def test_detector_records_every_decision_with_a_reason(
+    tiny: RadarSequence, unthrottled: Revisit
+) -> None:
+    assert_accepted_loops_true(tiny, unthrottled)
+    forced = [d for d in unthrottled.detector.decisions if d.match_key == unthrottled.wrong_key]
     assert forced and not forced[0].accepted
     assert "sinogram" in forced[0].reason or "phase" in forced[0].reason
+
+
+def test_throttled_detector_verifies_a_closed_stretch_sparsely(
+    tiny: RadarSequence, unthrottled: Revisit
+) -> None:
+    """The same revisit throttled: once three loops closed the stretch, a query is verified once
+    per 10 m of travel (the revisit is 50 m long); every accepted loop stays true."""
+    throttle = ThrottleConfig(closed_after=3, closed_spacing_m=10.0)
+    run = run_revisit(tiny, dataclasses.replace(EVERY_SCAN_QUERIES, throttle=throttle))
+    assert_accepted_loops_true(tiny, run)
+    detector, before = run.detector, unthrottled.detector
+    revisit_queries = len(run.scans) - len(tiny)
+    assert len(before.decisions) >= revisit_queries  # every revisit scan was verified
+    assert detector.skipped_queries > 0
+    verified_keys = sorted({d.query_key for d in detector.decisions if d.query_key >= len(tiny)})
+    gt = tiny.ground_truth
+    assert gt is not None
+    revisit_m = float(path_lengths(np.asarray(gt)[1 : len(tiny) // 2])[-1])
+    bound = throttle.closed_after + 2 + revisit_m / throttle.closed_spacing_m
+    assert len(verified_keys) <= bound < revisit_queries
+    assert len(run.accepted) >= throttle.closed_after
 
 
 def test_null_detector_does_nothing(tiny: RadarSequence) -> None:

@@ -4,7 +4,11 @@ Two loops (qa, ma, za) and (qb, mb, zb) agree when za * T_ma_mb = T_qa_qb * zb w
 covariance of the two loops and of the odometry segments between their queries and between their
 matches (which grows with the segments' length). A loop is accepted once `min_support` other loops
 agree with it; until then it is pending; it is rejected when it contradicts every accepted loop
-nearby, or when the query has moved `window_m` on without support.
+nearby, or when the query has moved `window_m` on without support. Two loops judge each other
+only when no odometry step between their queries, nor between their matches, turned faster than
+the odometry's plausible yaw rate (`VerifiedLoop.query_segment` / `match_segment`): across such a
+step the odometry poses are not trusted, and a loop measured there can share their error (a scan
+swept while spinning), which the cycle would then confirm instead of catching.
 """
 
 from __future__ import annotations
@@ -107,6 +111,8 @@ class ConsistencyGate:
             for n, other in enumerate(self._loops[first:], start=first)
             if self._status[n] != "rejected"
             and other.query_key != loop.query_key
+            and other.query_segment == loop.query_segment
+            and other.match_segment == loop.match_segment
             and abs(loop.query_path_m - other.query_path_m) <= cfg.window_m
             and abs(loop.match_path_m - other.match_path_m) <= cfg.window_m
         ]

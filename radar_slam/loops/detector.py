@@ -80,6 +80,7 @@ class _Track:
     path_m: float = 0.0
     path_at_last_entry_m: float = -np.inf
     with_poses: bool | None = None
+    segment: int = 0  # odometry steps so far that turned implausibly fast
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,7 @@ class _Entry:
     path_m: float
     twist: FloatArray | None
     scan: Scan | None
+    segment: int = 0
 
 
 class LoopDetector:
@@ -250,6 +252,8 @@ class LoopDetector:
             track.path_m += float(np.hypot(motion[0], motion[1]))
             dt_s = (int(scan.timestamp_ns) - track.last_time_ns) / NS_PER_S
             twist = twist_from_motion(motion, dt_s)
+            if abs(np.rad2deg(twist[2])) > self.config.refinement.quality.max_yaw_rate_dps:
+                track.segment += 1  # the odometry is not trusted across this step
         previous = self._entries.get(track.last_key) if track.last_key is not None else None
         if twist is not None and previous is not None and previous.twist is None:
             # The first scan had no velocity yet: de-skew it with the one that follows.
@@ -290,6 +294,7 @@ class LoopDetector:
             path_m=self._track.path_m,
             twist=twist,
             scan=None if self.scan_loader is not None else scan,
+            segment=self._track.segment,
         )
         self._entries[key] = entry
         if entry.scan is None:
@@ -337,6 +342,8 @@ class LoopDetector:
                             match_pose=match.pose,
                             query_path_m=entry.path_m,
                             match_path_m=match.path_m,
+                            query_segment=entry.segment,
+                            match_segment=match.segment,
                         )
                     )
                 )

@@ -71,6 +71,13 @@ DEFAULT_ISAM2_RELINEARIZE_SKIP = 1
 DEFAULT_LOOP_UPDATE_INTERVAL = 10
 """Scans between ISAM2 updates that carry loops in `radar_slam.pipeline.Pipeline`."""
 
+DEFAULT_SETTLED_UPDATE_INTERVAL = 100
+"""... when every new loop agrees with the current estimate (see `GraphConfig`)."""
+
+DEFAULT_SETTLED_CHI2 = 11.345
+"""A loop agrees with the current estimate below this squared Mahalanobis distance (chi-square
+99 % for 3 degrees of freedom)."""
+
 DEFAULT_ISAM2_ITERATIONS = 1
 """ISAM2 update steps per `PoseGraph.update()`: the first carries the new factors, the others
 relinearise once more (helps after a large loop-closure correction)."""
@@ -100,7 +107,12 @@ class GraphConfig:
         isam2_iterations: ISAM2 steps per `PoseGraph.update()` (>= 1).
         loop_update_interval: the pipeline adds accepted loops to the graph as they come but runs
             ISAM2 at most once every this many scans (each loop update re-eliminates the path
-            back to the loop's older end; 1: after every scan with new loops).
+            back to the loop's older end; 1: after every scan with new loops) ...
+        settled_update_interval: ... and at most once every this many scans while every loop
+            added since the last update agrees with the current estimate (a stretch already
+            closed: the update would barely move it; its loops enter the graph all the same).
+        settled_chi2: a loop agrees with the current estimate when its squared Mahalanobis
+            distance from it (`PoseGraph.residual_chi2`) is below this.
         final_pass: batch pass of `optimize_final()`: Levenberg-Marquardt with the robust loop
             kernel, graduated non-convexity (odometry and priors known inliers, loops plain
             Gaussian under the GNC loss), or nothing.
@@ -117,6 +129,8 @@ class GraphConfig:
     isam2_relinearize_skip: int = DEFAULT_ISAM2_RELINEARIZE_SKIP
     isam2_iterations: int = DEFAULT_ISAM2_ITERATIONS
     loop_update_interval: int = DEFAULT_LOOP_UPDATE_INTERVAL
+    settled_update_interval: int = DEFAULT_SETTLED_UPDATE_INTERVAL
+    settled_chi2: float = DEFAULT_SETTLED_CHI2
     final_pass: FinalPass = "gnc"
     lm_max_iterations: int = DEFAULT_LM_MAX_ITERATIONS
     lm_relative_error_tol: float = DEFAULT_LM_RELATIVE_ERROR_TOL
@@ -136,6 +150,8 @@ class GraphConfig:
         checks.at_least("isam2_relinearize_skip", self.isam2_relinearize_skip, 1)
         checks.at_least("isam2_iterations", self.isam2_iterations, 1)
         checks.at_least("loop_update_interval", self.loop_update_interval, 1)
+        checks.at_least("settled_update_interval", self.settled_update_interval, 1)
+        checks.non_negative("settled_chi2", self.settled_chi2)
         checks.at_least("lm_max_iterations", self.lm_max_iterations, 1)
         checks.positive("lm_relative_error_tol", self.lm_relative_error_tol)
         checks.in_range("gnc_inlier_probability", self.gnc_inlier_probability, 0.0, 1.0, True, True)
@@ -524,6 +540,16 @@ class PoseGraph:
         """(3,) estimate(key) composed with a relative `measurement` (3,): an initial guess for a
         new keyframe seen from `key`."""
         return se2.compose(self.estimate(key), as_pose(measurement, "predict measurement"))
+
+    def residual_chi2(self, constraint_id: int) -> float:
+        """Squared Mahalanobis distance of a factor's measurement from the latest estimates of
+        its two keyframes (before the next update: how much the factor still has to correct)."""
+        if not 0 <= constraint_id < len(self._constraints):
+            raise GraphError(f"no constraint with id {constraint_id}")
+        c = self._constraints[constraint_id]
+        error = se2.between(c.measurement, se2.between(self.estimate(c.i), self.estimate(c.j)))
+        error[2] = se2.wrap_angle(error[2])
+        return float(error @ np.linalg.solve(c.covariance, error))
 
     def priors(self) -> list[Prior]:
         """All priors (the automatic one included once the graph has been optimised)."""

@@ -84,6 +84,23 @@ def test_square_known_answer(closing: str, final_pass: str) -> None:
     assert pose_error(g.estimates(), truth) < 1e-3
 
 
+def test_residual_chi2_measures_what_a_loop_still_has_to_correct() -> None:
+    """Before an update, a loop that agrees with the estimate has a small squared Mahalanobis
+    distance; one 0.5 m off, with 0.05 m loop sigmas, about (0.5 / 0.05)^2 = 100."""
+    g, truth = build_square(GraphConfig(), "4->0")
+    for _ in range(5):
+        g.update()
+    loop_cov = np.diag(SQUARE_LOOP_SIGMAS**2)
+    agreeing = g.add_loop(3, 1, se2.between(truth[3], truth[1]), loop_cov)
+    off = se2.compose(se2.between(truth[3], truth[1]), (0.5, 0.0, 0.0))
+    disagreeing = g.add_loop(3, 1, off, loop_cov)
+    assert g.residual_chi2(agreeing) < 0.01
+    expected = 0.5**2 / SQUARE_LOOP_SIGMAS[0] ** 2
+    assert g.residual_chi2(disagreeing) == pytest.approx(expected, rel=1e-3)
+    with pytest.raises(GraphError):
+        g.residual_chi2(99)
+
+
 def test_auto_prior_anchors_first_keyframe() -> None:
     g, truth = build_square(GraphConfig(), "4->0")
     g.update()

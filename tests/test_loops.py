@@ -21,6 +21,7 @@ from radar_slam.loops import (
     LoopCovarianceConfig,
     LoopDetector,
     NullLoopDetector,
+    ThrottleConfig,
     VerifiedLoop,
     cycle_mahalanobis,
     loop_covariance,
@@ -217,6 +218,46 @@ def test_cycle_mahalanobis_is_small_for_true_and_large_for_false_loops() -> None
     assert cycle_mahalanobis(bad, [a], cfg)[0] > cfg.chi2_threshold
 
 
+def spin_scenario(segments: bool) -> dict[int, str]:
+    """A second lap whose odometry gets one spin 1 rad wrong at scan `spin`; the loop just after
+    it is measured as wrong as the odometry there (a scan swept while spinning), the loops before
+    and after it are true. Returns the final status of every loop by query scan (`segments`:
+    whether the loops carry the odometry segments the detector gives them)."""
+    gt = square_laps()
+    lap, spin = 240, 270
+    motions = relative_motions(gt)
+    motions[spin - 1, 2] += 1.0  # the step into scan `spin` turned implausibly fast
+    odo = accumulate(motions)
+    path = path_lengths(odo)
+    gate = ConsistencyGate(ConsistencyConfig())
+    status: dict[int, str] = {}
+    for n, q in enumerate([spin - 6, spin - 4, spin - 2, spin + 1, spin + 3, spin + 5, spin + 7]):
+        m = q - lap
+        wrong = q == spin + 1
+        z = between(odo[q], odo[m]) if wrong else between(gt[q], gt[m])
+        candidate = dataclasses.replace(
+            loop(n, q, m, z, odo, path), query_segment=int(segments and q >= spin)
+        )
+        gate.expire(path[q])
+        status[n] = "pending"
+        status.update(gate.add(candidate))
+    status.update(gate.finish())
+    queries = [spin - 6, spin - 4, spin - 2, spin + 1, spin + 3, spin + 5, spin + 7]
+    return {queries[n]: s for n, s in status.items()}
+
+
+def test_loops_do_not_vouch_for_each_other_across_an_implausible_odometry_step() -> None:
+    """The cause of long_city's two false loops: a loop measured on a scan swept while spinning
+    shares the odometry's error there, so the cycle with the loops before the spin confirms it.
+    Across such a step (another odometry segment) loops do not judge each other: the wrong loop
+    finds no support among the true loops after the spin, which accept each other."""
+    unsegmented = spin_scenario(segments=False)
+    assert unsegmented[271] == "accepted"  # the failure mode without segments
+    segmented = spin_scenario(segments=True)
+    assert segmented[271] == "rejected"
+    assert all(segmented[q] == "accepted" for q in (264, 266, 268, 273, 275, 277))
+
+
 def ate(est: np.ndarray, gt: np.ndarray) -> float:
     """RMS position error after aligning the first poses (test helper)."""
     aligned = compose(compose(gt[0], between(est[0], np.zeros(3))), est)
@@ -296,11 +337,20 @@ class InjectOnce:
         return found
 
 
-def test_detector_records_every_decision_with_a_reason(tiny: RadarSequence) -> None:
-    """A revisit: the tiny drive, then its first half again (every other scan, so the scans
-    differ from the first pass) a lap later, with ground-truth poses; one wrong candidate is
-    forced into the queries."""
-    cfg = dataclasses.replace(LoopClosureConfig(), query_spacing_m=0.0)  # every scan queries
+@dataclasses.dataclass
+class Revisit:
+    """A detector's run over `revisit_frames`."""
+
+    detector: LoopDetector
+    accepted: list
+    scans: list[tuple[int, int]]  # per key: (tiny scan index, time shift [ns])
+    wrong_key: int  # the candidate forced into one query
+
+
+def run_revisit(tiny: RadarSequence, cfg: LoopClosureConfig) -> Revisit:
+    """The tiny drive, then its first half again (every other scan, so the scans differ from
+    the first pass) a lap later, with ground-truth poses; one wrong candidate is forced into the
+    queries."""
     gt = tiny.ground_truth
     assert gt is not None
     n = len(tiny)
@@ -322,15 +372,59 @@ def test_detector_records_every_decision_with_a_reason(tiny: RadarSequence) -> N
     for key, (k, shift) in enumerate(scans):
         accepted += detector.add(frame(k, shift), gt[k], key)
     accepted += detector.finish()
-    decisions = detector.decisions
-    assert accepted and len(accepted) == sum(d.accepted for d in decisions)
+    return Revisit(detector, accepted, scans, wrong_key)
+
+
+EVERY_SCAN_QUERIES = dataclasses.replace(LoopClosureConfig(), query_spacing_m=0.0)
+
+
+@pytest.fixture(scope="module")
+def unthrottled(tiny: RadarSequence) -> Revisit:
+    """Every scan queries and is verified (no throttling)."""
+    cfg = dataclasses.replace(EVERY_SCAN_QUERIES, throttle=ThrottleConfig(closed_spacing_m=0.0))
+    return run_revisit(tiny, cfg)
+
+
+def assert_accepted_loops_true(tiny: RadarSequence, run: Revisit) -> None:
+    gt = tiny.ground_truth
+    assert gt is not None
+    decisions = run.detector.decisions
+    assert run.accepted and len(run.accepted) == sum(d.accepted for d in decisions)
     for d in decisions:
         assert d.reason and d.status in ("accepted", "rejected")
         if d.accepted:
-            assert is_true_loop(d.measurement, gt[scans[d.query_key][0]], gt[scans[d.match_key][0]])
-    forced = [d for d in decisions if d.match_key == wrong_key]
+            q, m = run.scans[d.query_key][0], run.scans[d.match_key][0]
+            assert is_true_loop(d.measurement, gt[q], gt[m])
+
+
+def test_detector_records_every_decision_with_a_reason(
+    tiny: RadarSequence, unthrottled: Revisit
+) -> None:
+    assert_accepted_loops_true(tiny, unthrottled)
+    forced = [d for d in unthrottled.detector.decisions if d.match_key == unthrottled.wrong_key]
     assert forced and not forced[0].accepted
     assert "sinogram" in forced[0].reason or "phase" in forced[0].reason
+
+
+def test_throttled_detector_verifies_a_closed_stretch_sparsely(
+    tiny: RadarSequence, unthrottled: Revisit
+) -> None:
+    """The same revisit throttled: once three loops closed the stretch, a query is verified once
+    per 10 m of travel (the revisit is 50 m long); every accepted loop stays true."""
+    throttle = ThrottleConfig(closed_after=3, closed_spacing_m=10.0)
+    run = run_revisit(tiny, dataclasses.replace(EVERY_SCAN_QUERIES, throttle=throttle))
+    assert_accepted_loops_true(tiny, run)
+    detector, before = run.detector, unthrottled.detector
+    revisit_queries = len(run.scans) - len(tiny)
+    assert len(before.decisions) >= revisit_queries  # every revisit scan was verified
+    assert detector.skipped_queries > 0
+    verified_keys = sorted({d.query_key for d in detector.decisions if d.query_key >= len(tiny)})
+    gt = tiny.ground_truth
+    assert gt is not None
+    revisit_m = float(path_lengths(np.asarray(gt)[1 : len(tiny) // 2])[-1])
+    bound = throttle.closed_after + 2 + revisit_m / throttle.closed_spacing_m
+    assert len(verified_keys) <= bound < revisit_queries
+    assert len(run.accepted) >= throttle.closed_after
 
 
 def test_null_detector_does_nothing(tiny: RadarSequence) -> None:

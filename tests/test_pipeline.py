@@ -69,7 +69,8 @@ def test_a_revisit_closes_the_loop_and_the_ate_drops(tiny_loop: RadarSequence, b
 def test_loops_batched_into_fewer_isam2_updates_give_the_same_result(
     tiny_loop: RadarSequence, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """`graph.loop_update_interval` (10 by default) runs ISAM2 at most every 10 scans instead of
+    """ISAM2 runs at most every `graph.loop_update_interval` (10) scans, and every
+    `graph.settled_update_interval` (100) while the new loops agree with the estimate, instead of
     after every scan with new loops: the same loops, and the final batch pass lands on the same
     trajectory."""
     updates: list[int] = []
@@ -82,17 +83,25 @@ def test_loops_batched_into_fewer_isam2_updates_give_the_same_result(
     monkeypatch.setattr(PoseGraph, "update", counted)
     config = load_config("synthetic")
     every_scan = dataclasses.replace(
-        config, graph=dataclasses.replace(config.graph, loop_update_interval=1)
+        config,
+        graph=dataclasses.replace(config.graph, loop_update_interval=1, settled_update_interval=1),
     )
     eager = Pipeline(tiny_loop, every_scan).run()
     eager_updates = len(updates)
     updates.clear()
     batched = Pipeline(tiny_loop, config).run()
     assert config.graph.loop_update_interval == 10
+    assert config.graph.settled_update_interval == 100
     assert len(updates) < eager_updates
     during_run = [n for n in updates if n < len(tiny_loop)]  # not the final ones
     assert np.all(np.diff(during_run) >= config.graph.loop_update_interval)
     assert batched.metrics.loops_accepted == eager.metrics.loops_accepted >= 3
+    # A loop that agreed with the estimate waited longer than 10 scans for its update.
+    lag = config.concurrency.loop_lag_scans
+    frames = len(tiny_loop)
+    added = sorted({min(d.query_key + lag + 1, frames) for d in batched.accepted_loops})
+    waits = [min(n for n in updates if n >= k) - k for k in added]
+    assert max(waits) > config.graph.loop_update_interval
     offsets = np.hypot(*(batched.slam.poses[:, :2] - eager.slam.poses[:, :2]).T)
     assert offsets.max() < 1e-3, offsets.max()
 

@@ -9,6 +9,7 @@ from radar_slam.loops.config import (
     ConsistencyConfig,
     LoopClosureConfig,
     LoopCovarianceConfig,
+    ThrottleConfig,
     VerificationConfig,
 )
 from radar_slam.loops.consistency import ConsistencyGate, cycle_mahalanobis
@@ -27,6 +28,7 @@ from radar_slam.loops.records import (
     Verification,
     VerifiedLoop,
 )
+from radar_slam.loops.throttle import StretchThrottle
 from radar_slam.loops.verification import (
     GeometricVerifier,
     Verifier,
@@ -50,6 +52,8 @@ __all__ = [
     "LoopStatus",
     "NullLoopDetector",
     "Recognizer",
+    "StretchThrottle",
+    "ThrottleConfig",
     "Verification",
     "VerificationConfig",
     "VerifiedLoop",

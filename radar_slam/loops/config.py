@@ -114,6 +114,42 @@ class ConsistencyConfig:
         checks.positive("min_sigma_yaw_deg", self.min_sigma_yaw_deg)
 
 
+@dataclass(frozen=True)
+class ThrottleConfig:
+    """Fewer verifications along stretches already closed (`radar_slam.loops.throttle`; used
+    when the detector is given poses).
+
+    Attributes:
+        closed_after: consecutive accepted loops along one stretch (matches advancing with the
+            queries, the same or the opposite way) that mark it closed.
+        closed_spacing_m: on a closed stretch, a query whose candidate lies on it is verified
+            at most once per this much travel [m] (the others are skipped); 0 verifies every
+            query (no throttling).
+        stretch_tolerance_m: a match is on a stretch when it lies within this path distance
+            [m] of where the stretch predicts it ...
+        stretch_drift_fraction: ... plus this fraction of the travel since the stretch's
+            latest loop (the two drives' odometry path lengths differ by the drift).
+        max_gap_m: a stretch without an accepted loop over this much travel [m] is forgotten.
+        max_stretches: stretches tracked at once (a place driven several times aligns with
+            each earlier drive); the oldest is dropped beyond.
+    """
+
+    closed_after: int = 3
+    closed_spacing_m: float = 20.0
+    stretch_tolerance_m: float = 12.0
+    stretch_drift_fraction: float = 0.05
+    max_gap_m: float = 100.0
+    max_stretches: int = 8
+
+    def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.at_least("closed_after", self.closed_after, 1)
+        checks.non_negative("closed_spacing_m", self.closed_spacing_m)
+        checks.non_negative("stretch_tolerance_m", self.stretch_tolerance_m)
+        checks.non_negative("stretch_drift_fraction", self.stretch_drift_fraction)
+        checks.positive("max_gap_m", self.max_gap_m)
+        checks.at_least("max_stretches", self.max_stretches, 1)
+
+
 LOOP_POSE_N_THETA = 120
 """Sinogram angles of the loop verifier's pose estimate (RaPlace's default 180 is 1.6x slower for
 the same result once phase correlation refines it)."""
@@ -148,6 +184,7 @@ class LoopClosureConfig:
         verification: geometric verification thresholds.
         covariance: covariance model of verified loops.
         consistency: pairwise consistency of verified loops.
+        throttle: fewer verifications along stretches already closed (with poses).
         scan_cache_mb: database scans kept in memory for verification [MiB] (the least
             recently used beyond it are read again through the detector's `scan_loader`; about
             1.3 MiB per MulRan scan).
@@ -165,6 +202,7 @@ class LoopClosureConfig:
     verification: VerificationConfig = field(default_factory=VerificationConfig)
     covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
+    throttle: ThrottleConfig = field(default_factory=ThrottleConfig)
     scan_cache_mb: float = 384.0  # issue-15
     pose_image_cache_mb: float = 96.0  # issue-15
 

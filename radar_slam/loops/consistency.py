@@ -4,10 +4,16 @@ Two loops (qa, ma, za) and (qb, mb, zb) agree when za * T_ma_mb = T_qa_qb * zb w
 covariance of the two loops and of the odometry segments between their queries and between their
 matches (which grows with the segments' length). A loop is accepted once `min_support` other loops
 agree with it; until then it is pending; it is rejected when it contradicts every accepted loop
-nearby, or when the query has moved `window_m` on without support.
+nearby, or when the query has moved `window_m` on without support. Two loops judge each other
+only when no odometry step between their queries, nor between their matches, turned faster than
+the odometry's plausible yaw rate (`VerifiedLoop.query_segment` / `match_segment`): across such a
+step the odometry poses are not trusted, and a loop measured there can share their error (a scan
+swept while spinning), which the cycle would then confirm instead of catching.
 """
 
 from __future__ import annotations
+
+from bisect import bisect_left
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -83,6 +89,8 @@ class ConsistencyGate:
         self._status: list[LoopStatus] = []
         self._support: list[set[int]] = []  # per loop: decisions of the loops agreeing with it
         self._pending: list[int] = []  # positions of the pending loops
+        self._query_paths: list[float] = []  # per loop: query path [m], to find the window
+        self._in_path_order = True  # loops added in order of query path (the detector's case)
         self.reasons: dict[int, str] = {}  # decision -> reason of its latest status
 
     def __len__(self) -> int:
@@ -95,11 +103,16 @@ class ConsistencyGate:
             decision -> new status of every loop whose status this call set (`loop` included).
         """
         cfg = self.cfg
+        first = 0
+        if self._in_path_order:  # only the loops whose query lies within the window
+            first = bisect_left(self._query_paths, loop.query_path_m - cfg.window_m)
         live = [
             n
-            for n, other in enumerate(self._loops)
+            for n, other in enumerate(self._loops[first:], start=first)
             if self._status[n] != "rejected"
             and other.query_key != loop.query_key
+            and other.query_segment == loop.query_segment
+            and other.match_segment == loop.match_segment
             and abs(loop.query_path_m - other.query_path_m) <= cfg.window_m
             and abs(loop.match_path_m - other.match_path_m) <= cfg.window_m
         ]
@@ -109,7 +122,10 @@ class ConsistencyGate:
         accepted_agree = [n for n in agree if self._status[n] == "accepted"]
 
         index = len(self._loops)
+        if self._query_paths and loop.query_path_m < self._query_paths[-1]:
+            self._in_path_order = False
         self._loops.append(loop)
+        self._query_paths.append(loop.query_path_m)
         self._support.append({self._loops[n].decision for n in agree})
         changes: dict[int, LoopStatus] = {}
         if accepted_near and not accepted_agree:

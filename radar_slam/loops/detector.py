@@ -4,8 +4,11 @@ For every database scan (one every `query_spacing_m` of travel when poses are gi
 scan) the `LoopDetector` queries the place database for `candidates` matches and proposes those
 below `max_descriptor_distance`, verifies each proposal, best first, until one passes
 (`radar_slam.loops.verification`), and, with poses, accepts a verified loop once another loop
-nearby agrees with it (`radar_slam.loops.consistency`). Every verified proposal becomes a
-`LoopDecision` with its reason. `NullLoopDetector` has the same interface and does nothing.
+nearby agrees with it (`radar_slam.loops.consistency`); with poses too, a query on a stretch
+already closed by consecutive accepted loops is verified only once per
+`throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`). Every verified proposal
+becomes a `LoopDecision` with its reason. `NullLoopDetector` has the same interface and does
+nothing.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from radar_slam.loops.records import (
     LoopStatus,
     VerifiedLoop,
 )
+from radar_slam.loops.throttle import StretchThrottle
 from radar_slam.loops.verification import GeometricVerifier, Verifier
 from raplace.descriptor import DescriptorExtractor
 from raplace.retrieval import PlaceRecognizer, Recognizer
@@ -76,6 +80,7 @@ class _Track:
     path_m: float = 0.0
     path_at_last_entry_m: float = -np.inf
     with_poses: bool | None = None
+    segment: int = 0  # odometry steps so far that turned implausibly fast
 
 
 @dataclass(frozen=True)
@@ -88,6 +93,7 @@ class _Entry:
     path_m: float
     twist: FloatArray | None
     scan: Scan | None
+    segment: int = 0
 
 
 class LoopDetector:
@@ -129,6 +135,7 @@ class LoopDetector:
         )
         self.verifier: Verifier = GeometricVerifier(cfg) if verifier is None else verifier
         self.gate = ConsistencyGate(cfg.consistency)
+        self.throttle = StretchThrottle(cfg.throttle)
         self._entries: dict[int, _Entry] = {}
         self._scans: ByteBudgetCache[Scan] = ByteBudgetCache(cfg.scan_cache_mb, _scan_bytes)
         self._decisions: list[LoopDecision] = []
@@ -181,11 +188,19 @@ class LoopDetector:
         ):
             track.path_at_last_entry_m = track.path_m
             changes.update(self._query_and_insert(scan, pose_arr, key, twist))
+        self.throttle.resolved(changes)
         return self._apply(changes)
 
     def finish(self) -> list[LoopConstraint]:
         """Resolve the loops still pending (rejected: no support); returns [] (for symmetry)."""
-        return self._apply(self.gate.finish())
+        changes = self.gate.finish()
+        self.throttle.resolved(changes)
+        return self._apply(changes)
+
+    @property
+    def skipped_queries(self) -> int:
+        """Queries with candidates left unverified because they lay on a closed stretch."""
+        return self.throttle.skipped
 
     def reject(self, decision: int, reason: str) -> None:
         """Mark an accepted loop as rejected afterwards (e.g. by the back end's GNC pass)."""
@@ -237,6 +252,8 @@ class LoopDetector:
             track.path_m += float(np.hypot(motion[0], motion[1]))
             dt_s = (int(scan.timestamp_ns) - track.last_time_ns) / NS_PER_S
             twist = twist_from_motion(motion, dt_s)
+            if abs(np.rad2deg(twist[2])) > self.config.refinement.quality.max_yaw_rate_dps:
+                track.segment += 1  # the odometry is not trusted across this step
         previous = self._entries.get(track.last_key) if track.last_key is not None else None
         if twist is not None and previous is not None and previous.twist is None:
             # The first scan had no velocity yet: de-skew it with the one that follows.
@@ -277,13 +294,18 @@ class LoopDetector:
             path_m=self._track.path_m,
             twist=twist,
             scan=None if self.scan_loader is not None else scan,
+            segment=self._track.segment,
         )
         self._entries[key] = entry
         if entry.scan is None:
             self._scans.put(key, scan)
         self.proposed += len(candidates)
-        query = KeyScan(key, entry.timestamp_ns, scan, twist)
         changes: dict[int, LoopStatus] = {}
+        if pose is not None and not self.throttle.due(
+            entry.path_m, [self._entries[c.key].path_m for c in candidates]
+        ):
+            return changes
+        query = KeyScan(key, entry.timestamp_ns, scan, twist)
         passed = 0
         for candidate in candidates:  # at most `candidates` (k), best first
             match = self._entries[candidate.key]
@@ -298,6 +320,9 @@ class LoopDetector:
                 candidate.distance,
                 result.reason or "verified",
             )
+            if pose is not None:
+                yaw = float(result.measurement[2])
+                self.throttle.verified(decision, entry.path_m, match.path_m, yaw, result.ok)
             if not result.ok:
                 continue
             passed += 1
@@ -317,6 +342,8 @@ class LoopDetector:
                             match_pose=match.pose,
                             query_path_m=entry.path_m,
                             match_path_m=match.path_m,
+                            query_segment=entry.segment,
+                            match_segment=match.segment,
                         )
                     )
                 )

@@ -151,6 +151,9 @@ class VerifiedLoop:
         measurement: (3,) T_query_match; covariance: (3, 3).
         query_pose, match_pose: (3,) odometry poses T_world_scan of the two scans.
         query_path_m, match_path_m: odometry path length from the first scan [m].
+        query_segment, match_segment: odometry segments of the two scans: the number of odometry
+            steps before them that turned implausibly fast (the odometry is not trusted across
+            such a step, so loops on either side of one do not judge each other).
     """
 
     decision: int
@@ -162,3 +165,5 @@ class VerifiedLoop:
     match_pose: FloatArray
     query_path_m: float
     match_path_m: float
+    query_segment: int = 0
+    match_segment: int = 0

@@ -20,8 +20,11 @@ the results do not depend on timing (`radar_slam.pipeline.concurrency`). With th
 time "loop detection" is the worker's (it overlaps the others) and "loop wait" the main thread's
 waiting for it; a loop detector given to the pipeline is then called from the worker thread only.
 
-ISAM2 is updated whenever loops are added (so later loops are checked and initial guesses are
-made against the corrected estimate) and once at the end; a final batch pass (GNC by default)
+ISAM2 is updated after loops are added (so that initial guesses are made against the corrected
+estimate), at most every `graph.loop_update_interval` scans, or every
+`graph.settled_update_interval` scans while every loop added since the last update agrees with
+the current estimate (`graph.settled_chi2`: a stretch already closed), and once at the end; a
+final batch pass (GNC by default)
 follows, and accepted loops whose final weight falls below `BACKEND_REJECT_WEIGHT` are recorded as
 rejected by the back end.
 
@@ -109,6 +112,7 @@ class Pipeline:
         self._results: list[OdometryResult] = []
         self._loop_ids: dict[tuple[int, int], int] = {}  # (query, match) -> graph loop id
         self._loops_pending = False  # loops added to the graph since its last ISAM2 update
+        self._loops_correct = False  # ... one of which disagrees with the current estimate
         self._last_update = 0  # scan index of that update
         self._start = 0.0
         concurrency = self.config.concurrency
@@ -174,17 +178,23 @@ class Pipeline:
 
     def _close_loops(self, loops: list[LoopConstraint], index: int | None) -> None:
         """Add `loops` to the graph; run ISAM2 once `graph.loop_update_interval` scans have
-        passed since its last update (`index` None: the end of the run, where `_optimise`
-        updates)."""
+        passed since its last update, or `graph.settled_update_interval` while every loop added
+        since agrees with the current estimate (`index` None: the end of the run, where
+        `_optimise` updates)."""
+        cfg = self.config.graph
         with self.timer("graph"):
             for loop in loops:
                 loop_id = self.graph.add_loop(loop.i, loop.j, loop.measurement, loop.covariance)
                 self._loop_ids[(loop.i, loop.j)] = loop_id
+                if not self._loops_correct:
+                    self._loops_correct = self.graph.residual_chi2(loop_id) > cfg.settled_chi2
             self._loops_pending |= bool(loops)
-            interval = self.config.graph.loop_update_interval
+            interval = cfg.loop_update_interval
+            if not self._loops_correct:
+                interval = max(interval, cfg.settled_update_interval)
             if index is not None and self._loops_pending and index - self._last_update >= interval:
                 self.graph.update()
-                self._loops_pending = False
+                self._loops_pending = self._loops_correct = False
                 self._last_update = index
 
     def _report(self, done: int) -> None:

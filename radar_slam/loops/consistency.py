@@ -5,10 +5,11 @@ covariance of the two loops and of the odometry segments between their queries a
 matches (which grows with the segments' length). A loop is accepted once `min_support` other loops
 agree with it; until then it is pending; it is rejected when it contradicts every accepted loop
 nearby, or when the query has moved `window_m` on without support. Two loops judge each other
-only when no odometry step between their queries, nor between their matches, turned faster than
-the odometry's plausible yaw rate (`VerifiedLoop.query_segment` / `match_segment`): across such a
-step the odometry poses are not trusted, and a loop measured there can share their error (a scan
-swept while spinning), which the cycle would then confirm instead of catching.
+only when no odometry step between their queries, nor between their matches, moved or turned
+faster than a vehicle can (`odometry.recovery.plausible_twist`; `VerifiedLoop.query_segment` /
+`match_segment`): across such a step the odometry poses are not trusted, and a loop measured
+there can share their error (a scan swept while spinning), which the cycle would then confirm
+instead of catching.
 """
 
 from __future__ import annotations

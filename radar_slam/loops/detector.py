@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from odometry.deskew import twist_from_motion
+from odometry.recovery import plausible_twist
 from odometry.scan import Scan
 from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig
@@ -80,7 +81,7 @@ class _Track:
     path_m: float = 0.0
     path_at_last_entry_m: float = -np.inf
     with_poses: bool | None = None
-    segment: int = 0  # odometry steps so far that turned implausibly fast
+    segment: int = 0  # odometry steps so far faster than a vehicle moves or turns
 
 
 @dataclass(frozen=True)
@@ -252,7 +253,7 @@ class LoopDetector:
             track.path_m += float(np.hypot(motion[0], motion[1]))
             dt_s = (int(scan.timestamp_ns) - track.last_time_ns) / NS_PER_S
             twist = twist_from_motion(motion, dt_s)
-            if abs(np.rad2deg(twist[2])) > self.config.refinement.quality.max_yaw_rate_dps:
+            if not plausible_twist(twist, self.config.refinement):
                 track.segment += 1  # the odometry is not trusted across this step
         previous = self._entries.get(track.last_key) if track.last_key is not None else None
         if twist is not None and previous is not None and previous.twist is None:

@@ -152,8 +152,8 @@ class VerifiedLoop:
         query_pose, match_pose: (3,) odometry poses T_world_scan of the two scans.
         query_path_m, match_path_m: odometry path length from the first scan [m].
         query_segment, match_segment: odometry segments of the two scans: the number of odometry
-            steps before them that turned implausibly fast (the odometry is not trusted across
-            such a step, so loops on either side of one do not judge each other).
+            steps before them faster than a vehicle moves or turns (the odometry is not trusted
+            across such a step, so loops on either side of one do not judge each other).
     """
 
     decision: int

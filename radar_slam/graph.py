@@ -62,11 +62,14 @@ ConstraintKind = Literal["odometry", "loop"]
 DEFAULT_PRIOR_SIGMAS: tuple[float, float, float] = (1e-3, 1e-3, 1e-4)
 """Standard deviations (x [m], y [m], yaw [rad]) of the prior anchoring the first keyframe."""
 
-DEFAULT_ISAM2_RELINEARIZE_THRESHOLD = 0.01
-"""ISAM2 relinearises a variable whose tangent-space update exceeds this (m / rad)."""
+ONLINE_ISAM2_RELINEARIZATION = (0.01, 1)
+"""ISAM2 relinearisation threshold (m / rad) and check interval (updates) when the online estimate
+is the output (`final_pass: none`): a variable is relinearised once it moves 1 cm / 10 mrad."""
 
-DEFAULT_ISAM2_RELINEARIZE_SKIP = 1
-"""ISAM2 checks for relinearisation every this many updates."""
+REFINED_ISAM2_RELINEARIZATION = (0.1, 10)
+"""... and when a batch final pass refines the result (GTSAM's own defaults): the online estimate
+then only serves the loop gates and the live view, and relinearising less keeps the cost of each
+update from growing with the graph on long drives."""
 
 DEFAULT_LOOP_UPDATE_INTERVAL = 10
 """Scans between ISAM2 updates that carry loops in `radar_slam.pipeline.Pipeline`."""
@@ -102,8 +105,10 @@ class GraphConfig:
             first keyframe (and of the prior put on `FIX` vertices read from g2o).
         loop_kernel: robust loss of loop factors in ISAM2 and the LM final pass.
         loop_kernel_width: its parameter k, in standard deviations (whitened units).
-        isam2_relinearize_threshold: ISAM2 relinearisation threshold (tangent units, m / rad).
-        isam2_relinearize_skip: ISAM2 relinearisation check interval (updates).
+        isam2_relinearize_threshold: ISAM2 relinearisation threshold (tangent units, m / rad);
+            None: by `final_pass` (`ONLINE_ISAM2_RELINEARIZATION` with "none", else
+            `REFINED_ISAM2_RELINEARIZATION`), see `isam2_relinearization()`.
+        isam2_relinearize_skip: ISAM2 relinearisation check interval (updates); None: likewise.
         isam2_iterations: ISAM2 steps per `PoseGraph.update()` (>= 1).
         loop_update_interval: the pipeline adds accepted loops to the graph as they come but runs
             ISAM2 at most once every this many scans (each loop update re-eliminates the path
@@ -125,8 +130,8 @@ class GraphConfig:
     prior_sigmas: tuple[float, float, float] = DEFAULT_PRIOR_SIGMAS
     loop_kernel: LoopKernel = "cauchy"
     loop_kernel_width: float = DEFAULT_LOOP_KERNEL_WIDTH
-    isam2_relinearize_threshold: float = DEFAULT_ISAM2_RELINEARIZE_THRESHOLD
-    isam2_relinearize_skip: int = DEFAULT_ISAM2_RELINEARIZE_SKIP
+    isam2_relinearize_threshold: float | None = None
+    isam2_relinearize_skip: int | None = None
     isam2_iterations: int = DEFAULT_ISAM2_ITERATIONS
     loop_update_interval: int = DEFAULT_LOOP_UPDATE_INTERVAL
     settled_update_interval: int = DEFAULT_SETTLED_UPDATE_INTERVAL
@@ -145,9 +150,11 @@ class GraphConfig:
         checks.one_of("loop_kernel", self.loop_kernel, ("cauchy", "huber", "none"))
         checks.one_of("final_pass", self.final_pass, ("lm", "gnc", "none"))
         checks.one_of("gnc_loss", self.gnc_loss, ("tls", "gm"))
-        checks.non_negative("isam2_relinearize_threshold", self.isam2_relinearize_threshold)
+        if self.isam2_relinearize_threshold is not None:
+            checks.non_negative("isam2_relinearize_threshold", self.isam2_relinearize_threshold)
         checks.positive("loop_kernel_width", self.loop_kernel_width)
-        checks.at_least("isam2_relinearize_skip", self.isam2_relinearize_skip, 1)
+        if self.isam2_relinearize_skip is not None:
+            checks.at_least("isam2_relinearize_skip", self.isam2_relinearize_skip, 1)
         checks.at_least("isam2_iterations", self.isam2_iterations, 1)
         checks.at_least("loop_update_interval", self.loop_update_interval, 1)
         checks.at_least("settled_update_interval", self.settled_update_interval, 1)
@@ -155,6 +162,17 @@ class GraphConfig:
         checks.at_least("lm_max_iterations", self.lm_max_iterations, 1)
         checks.positive("lm_relative_error_tol", self.lm_relative_error_tol)
         checks.in_range("gnc_inlier_probability", self.gnc_inlier_probability, 0.0, 1.0, True, True)
+
+    def isam2_relinearization(self) -> tuple[float, int]:
+        """The ISAM2 relinearisation threshold (m / rad) and check interval (updates) in effect:
+        the configured values, or for each one left None the default for `final_pass`."""
+        online = self.final_pass == "none"
+        threshold, skip = ONLINE_ISAM2_RELINEARIZATION if online else REFINED_ISAM2_RELINEARIZATION
+        if self.isam2_relinearize_threshold is not None:
+            threshold = self.isam2_relinearize_threshold
+        if self.isam2_relinearize_skip is not None:
+            skip = self.isam2_relinearize_skip
+        return threshold, skip
 
 
 @dataclass(frozen=True)
@@ -246,8 +264,9 @@ class PoseGraph:
         self._final: dict[int, FloatArray] | None = None  # key -> final-pass estimate
         self._loop_weights: dict[int, float] = {}
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(self.config.isam2_relinearize_threshold)
-        params.relinearizeSkip = self.config.isam2_relinearize_skip
+        threshold, skip = self.config.isam2_relinearization()
+        params.setRelinearizeThreshold(threshold)
+        params.relinearizeSkip = skip
         self._solver = _SolverState(isam=gtsam.ISAM2(params))
 
     # ----------------------------------------------------------------- building

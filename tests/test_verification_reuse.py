@@ -1,5 +1,6 @@
 """Loop verification reusing the odometry's conditioned scans (issue 15): the same decisions
-and measurements as conditioning the query again, at most one handed-over scan kept."""
+and measurements as conditioning the query again, at most `OFFERS_KEPT` handed-over scans kept
+(the detector verifies a scan once the next one is in)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from odometry.registration import prepare
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.loops import GeometricVerifier, LoopClosureConfig, LoopDetector
 from radar_slam.loops.records import KeyScan, Verification
+from radar_slam.loops.verification import OFFERS_KEPT
 from radar_slam.pipeline import Pipeline, load_config
 from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
@@ -79,10 +81,18 @@ def test_the_odometrys_conditioned_scan_gives_the_same_loop(tiny: RadarSequence)
     assert_same(result, fresh(tiny))
 
 
-def test_only_a_matching_offer_is_used_and_only_the_latest_is_kept(tiny: RadarSequence) -> None:
+def test_only_a_matching_offer_is_used_and_only_the_latest_are_kept(tiny: RadarSequence) -> None:
     cfg = LoopClosureConfig()
+    assert OFFERS_KEPT == 2
     verifier = GeometricVerifier(cfg)
-    for k in (QUERY, QUERY + 1):  # the second replaces the first
+    for k in (QUERY, QUERY + 1):  # the offer of the next scan is in when a query is verified
+        scan = key_scan(tiny, k)
+        verifier.offer(k, prepare(scan.scan, cfg.refinement, scan.twist))
+    result = verifier(key_scan(tiny, QUERY), key_scan(tiny, MATCH))
+    assert verifier.reused == 1
+    assert_same(result, fresh(tiny))
+    verifier = GeometricVerifier(cfg)
+    for k in (QUERY, QUERY + 1, QUERY + 2):  # the third drops the first
         scan = key_scan(tiny, k)
         verifier.offer(k, prepare(scan.scan, cfg.refinement, scan.twist))
     result = verifier(key_scan(tiny, QUERY), key_scan(tiny, MATCH))

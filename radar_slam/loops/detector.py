@@ -6,9 +6,11 @@ below `max_descriptor_distance`, verifies each proposal, best first, until one p
 (`radar_slam.loops.verification`), and, with poses, accepts a verified loop once another loop
 nearby agrees with it (`radar_slam.loops.consistency`); with poses too, a query on a stretch
 already closed by consecutive accepted loops is verified only once per
-`throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`). Every verified proposal
-becomes a `LoopDecision` with its reason. `NullLoopDetector` has the same interface and does
-nothing.
+`throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`). Each scan is handled once
+the next one is in (or at `finish`): its de-skew twist is the odometry's velocity interpolated to
+the middle of its sweep from the steps before and after it (`radar_slam.loops.sweep_twist`).
+Every verified proposal becomes a `LoopDecision` with its reason. `NullLoopDetector` has the same
+interface and does nothing.
 """
 
 from __future__ import annotations
@@ -23,9 +25,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.deskew import twist_from_motion
-from odometry.recovery import plausible_twist
 from odometry.scan import Scan
+from odometry.velocity import Velocity
 from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
@@ -37,8 +38,9 @@ from radar_slam.loops.records import (
     LoopStatus,
     VerifiedLoop,
 )
+from radar_slam.loops.sweep_twist import step_twist, sweep_twist
 from radar_slam.loops.throttle import StretchThrottle
-from radar_slam.loops.verification import GeometricVerifier, Verifier
+from radar_slam.loops.verification import GeometricVerifier, Verifier, mean_acquisition_offset_s
 from raplace.descriptor import DescriptorExtractor
 from raplace.retrieval import PlaceRecognizer, Recognizer
 from raplace.se2 import between
@@ -70,6 +72,26 @@ class LoopDetectorProtocol(Protocol):
     def proposed(self) -> int: ...
 
 
+@dataclass(frozen=True)
+class _Held:
+    """The last scan fed, held until the next one is in (its velocity needs the step after it).
+
+    Attributes:
+        scan, pose, key: as given to `LoopDetector.add` (pose (3,) or None).
+        before: the velocity of the odometry step into this scan (None: first scan, no poses,
+            or a step beyond the vehicle's limits).
+        path_m: odometry path length up to this scan [m].
+        segment: odometry steps up to this scan faster than a vehicle moves or turns.
+    """
+
+    scan: Scan
+    pose: FloatArray | None
+    key: int
+    before: Velocity | None
+    path_m: float
+    segment: int
+
+
 @dataclass
 class _Track:
     """The detector's running state over the scans fed so far."""
@@ -82,6 +104,7 @@ class _Track:
     path_at_last_entry_m: float = -np.inf
     with_poses: bool | None = None
     segment: int = 0  # odometry steps so far faster than a vehicle moves or turns
+    held: _Held | None = None
 
 
 @dataclass(frozen=True)
@@ -102,8 +125,10 @@ class LoopDetector:
 
     Usable on its own (no radar_slam graph needed): feed every scan in time order with `add`;
     each call returns the loop constraints accepted by it (T_query_match with covariance, keys
-    = the scans' keys), ready for `radar_slam.graph.add_loop_factors` or any back end. Call
-    `finish()` after the last scan.
+    = the scans' keys), ready for `radar_slam.graph.add_loop_factors` or any back end. With
+    poses, a scan is queried when the next one is added (its velocity is then known on both
+    sides), so its loops come from that call at the earliest. Call `finish()` after the last
+    scan: it queries the last scan and returns the loops accepted then.
 
     Args:
         config: loop-closing settings (defaults when None).
@@ -180,23 +205,20 @@ class LoopDetector:
         track = self._track
         key = track.count if key is None else int(key)
         pose_arr = self._check(scan, pose, key)
-        twist = self._advance(scan, pose_arr, key)
-        changes: dict[int, LoopStatus] = {}
-        if pose_arr is not None:
-            changes.update(self.gate.expire(track.path_m))
-        if track.path_m - track.path_at_last_entry_m >= self.config.query_spacing_m or (
-            pose_arr is None
-        ):
-            track.path_at_last_entry_m = track.path_m
-            changes.update(self._query_and_insert(scan, pose_arr, key, twist))
-        self.throttle.resolved(changes)
-        return self._apply(changes)
+        before = self._advance(scan, pose_arr, key)
+        accepted = self._handle_held(after=before)
+        track.held = _Held(scan, pose_arr, key, before, track.path_m, track.segment)
+        if pose_arr is None:  # no velocity to wait for
+            accepted += self._handle_held(after=None)
+        return accepted
 
     def finish(self) -> list[LoopConstraint]:
-        """Resolve the loops still pending (rejected: no support); returns [] (for symmetry)."""
+        """Query the last scan, then resolve the loops still pending (rejected: no support);
+        returns the loops accepted by this call."""
+        accepted = self._handle_held(after=None)
         changes = self.gate.finish()
         self.throttle.resolved(changes)
-        return self._apply(changes)
+        return accepted + self._apply(changes)
 
     @property
     def skipped_queries(self) -> int:
@@ -244,27 +266,46 @@ class LoopDetector:
             raise LoopClosureError(f"scan {key}: pose must be 3 finite numbers, got {pose!r}")
         return arr
 
-    def _advance(self, scan: Scan, pose: FloatArray | None, key: int) -> FloatArray | None:
-        """Update the running path and return the scan's body twist (None without poses)."""
+    def _advance(self, scan: Scan, pose: FloatArray | None, key: int) -> Velocity | None:
+        """Update the running path; return the velocity of the odometry step into this scan
+        (None without poses, for the first scan, or when implausible)."""
         track = self._track
-        twist = None
+        velocity = None
         if pose is not None and track.last_pose is not None and track.last_time_ns is not None:
             motion = between(track.last_pose, pose)
             track.path_m += float(np.hypot(motion[0], motion[1]))
-            dt_s = (int(scan.timestamp_ns) - track.last_time_ns) / NS_PER_S
-            twist = twist_from_motion(motion, dt_s)
-            if not plausible_twist(twist, self.config.refinement):
+            step = step_twist(
+                motion, track.last_time_ns, int(scan.timestamp_ns), self.config.refinement
+            )
+            velocity = step.velocity
+            if not step.plausible:
                 track.segment += 1  # the odometry is not trusted across this step
-        previous = self._entries.get(track.last_key) if track.last_key is not None else None
-        if twist is not None and previous is not None and previous.twist is None:
-            # The first scan had no velocity yet: de-skew it with the one that follows.
-            self._entries[previous.key] = dataclasses.replace(previous, twist=twist)
         track.with_poses = pose is not None
         track.last_pose = pose
         track.last_time_ns = int(scan.timestamp_ns)
         track.last_key = key
         track.count += 1
-        return twist
+        return velocity
+
+    def _handle_held(self, after: Velocity | None) -> list[LoopConstraint]:
+        """Query the held scan (if any) with the velocity of the step after it, `after`."""
+        held, self._track.held = self._track.held, None
+        if held is None:
+            return []
+        track = self._track
+        twist = None
+        if held.pose is not None:
+            twist = sweep_twist(held.before, after, _mean_time_ns(held.scan))
+        changes: dict[int, LoopStatus] = {}
+        if held.pose is not None:
+            changes.update(self.gate.expire(held.path_m))
+        if held.path_m - track.path_at_last_entry_m >= self.config.query_spacing_m or (
+            held.pose is None
+        ):
+            track.path_at_last_entry_m = held.path_m
+            changes.update(self._query_and_insert(held, twist))
+        self.throttle.resolved(changes)
+        return self._apply(changes)
 
     def _scan_of(self, entry: _Entry) -> Scan:
         if entry.scan is not None:
@@ -276,10 +317,9 @@ class LoopDetector:
             self._scans.put(entry.key, scan)
         return scan
 
-    def _query_and_insert(
-        self, scan: Scan, pose: FloatArray | None, key: int, twist: FloatArray | None
-    ) -> dict[int, LoopStatus]:
+    def _query_and_insert(self, held: _Held, twist: FloatArray | None) -> dict[int, LoopStatus]:
         cfg = self.config
+        scan, pose, key = held.scan, held.pose, held.key
         time_s = int(scan.timestamp_ns) / NS_PER_S
         descriptor = self.describe(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
         candidates = [
@@ -292,10 +332,10 @@ class LoopDetector:
             key=key,
             timestamp_ns=int(scan.timestamp_ns),
             pose=pose,
-            path_m=self._track.path_m,
+            path_m=held.path_m,
             twist=twist,
             scan=None if self.scan_loader is not None else scan,
-            segment=self._track.segment,
+            segment=held.segment,
         )
         self._entries[key] = entry
         if entry.scan is None:
@@ -360,6 +400,13 @@ class LoopDetector:
             if status == "accepted":
                 accepted.append(new.constraint())
         return accepted
+
+
+def _mean_time_ns(scan: Scan) -> int:
+    """The scan's mean acquisition time [ns] (its reference time without azimuth times)."""
+    offset_s = mean_acquisition_offset_s(scan)
+    offset_ns = 0 if offset_s is None else round(offset_s * NS_PER_S)
+    return int(scan.timestamp_ns) + offset_ns
 
 
 def _scan_bytes(scan: Scan) -> int:

@@ -30,6 +30,8 @@ from raplace.se2 import between, compose, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
+OFFERS_KEPT = 2
+"""Offered conditioned scans kept: the detector queries scan k when scan k + 1 is offered."""
 
 
 def loop_covariance(
@@ -127,7 +129,8 @@ class GeometricVerifier:
 
     A caller that has already conditioned a scan for registration (the pipeline's odometry)
     hands it over with `offer` before the detector sees the scan; the query is then not
-    conditioned again (see `offer`). At most one offered scan is kept.
+    conditioned again (see `offer`). The last `OFFERS_KEPT` offered scans are kept (the detector
+    queries a scan once the next one is in).
     """
 
     def __init__(self, cfg: LoopClosureConfig) -> None:
@@ -139,13 +142,13 @@ class GeometricVerifier:
         self._query_key: int | None = None
         self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
-        self._offered: tuple[int, PolarScan, PreprocessConfig] | None = None
+        self._offered: dict[int, tuple[PolarScan, PreprocessConfig]] = {}
         self.reused = 0
         """Queries whose offered conditioned scan was used (a count, for benchmarks)."""
 
     def offer(self, key: int, prepared: PreparedScan) -> None:
         """Hand over scan `key`'s conditioned form (`odometry.Odometry.prepared`), to be used if
-        that scan is verified as a query next (only the latest offer is kept).
+        that scan is verified as a query (the last `OFFERS_KEPT` offers are kept).
 
         Made with the refinement's conditioning settings (`cfg.refinement.preprocess`), its
         conditioned polar scan is reused, de-skewed with the query's own velocity
@@ -154,7 +157,9 @@ class GeometricVerifier:
         de-skewed with the odometry's velocity, which moved loops by millimetres and the SLAM ATE
         of `synthetic/loop` from 0.130 to 0.138 m.) Only the polar scan is kept from the offer.
         """
-        self._offered = (int(key), prepared.polar, prepared.cfg.preprocess)
+        self._offered[int(key)] = (prepared.polar, prepared.cfg.preprocess)
+        while len(self._offered) > OFFERS_KEPT:
+            del self._offered[min(self._offered)]
 
     def _spectrum(self, scan: Scan) -> PoseSpectrum:
         image = self.pose_estimator.image(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
@@ -176,13 +181,15 @@ class GeometricVerifier:
 
     def _from_offer(self, query: KeyScan) -> PreparedScan | None:
         """The offered conditioned scan of `query` (see `offer`), or None."""
-        offered, self._offered = self._offered, None
+        offered = self._offered.pop(int(query.key), None)
+        for key in [k for k in self._offered if k < query.key]:
+            del self._offered[key]  # offered for an earlier scan
         if offered is None:
             return None
-        key, polar, conditioning = offered
+        polar, conditioning = offered
         refinement = self.cfg.refinement
-        if key != query.key or polar.timestamp_ns != int(query.timestamp_ns):
-            return None  # offered for an earlier scan
+        if polar.timestamp_ns != int(query.timestamp_ns):
+            return None  # offered for another scan with the same key
         if conditioning != refinement.preprocess:
             return None
         self.reused += 1

@@ -131,7 +131,8 @@ def test_detector_de_skews_each_scan_with_its_mid_sweep_velocity(tiny: RadarSequ
     # on the known arc: every query, the last one included, gets the velocity at mid-sweep.
     period_s, n = 1.0, 6
     recorder = Recorder()
-    cfg = dataclasses.replace(LoopClosureConfig(), query_spacing_m=0.0)
+    # every scan queries and every candidate is verified, however far apart on the arc
+    cfg = LoopClosureConfig(query_spacing_m=0.0, odometry_drift_fraction=np.inf)
     detector = LoopDetector(cfg, recognizer=EveryEntry(), verifier=recorder)
     for k in range(n):
         frame = tiny[k]

@@ -375,7 +375,9 @@ def run_revisit(tiny: RadarSequence, cfg: LoopClosureConfig) -> Revisit:
     return Revisit(detector, accepted, scans, wrong_key)
 
 
-EVERY_SCAN_QUERIES = dataclasses.replace(LoopClosureConfig(), query_spacing_m=0.0)
+EVERY_SCAN_QUERIES = LoopClosureConfig(query_spacing_m=0.0, odometry_drift_fraction=np.inf)
+"""Every scan queries, and every candidate is verified however far apart the poses put it (as
+after a strong odometry drift)."""
 
 
 @pytest.fixture(scope="module")
@@ -404,6 +406,15 @@ def test_detector_records_every_decision_with_a_reason(
     forced = [d for d in unthrottled.detector.decisions if d.match_key == unthrottled.wrong_key]
     assert forced and not forced[0].accepted
     assert "sinogram" in forced[0].reason or "phase" in forced[0].reason
+
+
+def test_a_candidate_the_odometry_places_out_of_reach_is_not_verified(tiny: RadarSequence) -> None:
+    """The forced wrong candidate lies at the far end of the drive, over 15 m from the query by
+    the poses after a short path: with the default drift allowance it is never verified."""
+    run = run_revisit(tiny, LoopClosureConfig(query_spacing_m=0.0))
+    assert run.detector.out_of_reach >= 1
+    assert all(d.match_key != run.wrong_key for d in run.detector.decisions)
+    assert_accepted_loops_true(tiny, run)
 
 
 def test_throttled_detector_verifies_a_closed_stretch_sparsely(

@@ -181,6 +181,15 @@ class LoopClosureConfig:
             (looser than a precision-oriented threshold: verification rejects the wrong ones).
         query_spacing_m: with poses, a scan enters the database and queries it once the path
             since the previous entry reaches this [m] (0: every scan); without poses, every scan.
+        recent_path_m: a scan joins the database once the vehicle has driven this far past it
+            [m] (with poses; without, after `raplace.retrieval.exclusion`'s entries and
+            seconds), so the stretch just driven is never a candidate at any frame rate or
+            speed (`radar_slam.loops.recent`); 0: at once, and the database's own exclusion
+            window decides what is recent.
+        odometry_drift_fraction: with poses, a candidate the odometry places farther from the
+            query than `verification.max_translation_m` plus this fraction of the path between
+            them is not verified (inf: every candidate is; the odometry is not trusted across
+            a step beyond the vehicle's limits, so candidates before one are always verified).
         verification: geometric verification thresholds.
         covariance: covariance model of verified loops.
         consistency: pairwise consistency of verified loops.
@@ -199,6 +208,8 @@ class LoopClosureConfig:
     loops_per_query: int = 1
     max_descriptor_distance: float = 0.25
     query_spacing_m: float = 4.0
+    recent_path_m: float = 50.0
+    odometry_drift_fraction: float = 0.05
     verification: VerificationConfig = field(default_factory=VerificationConfig)
     covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
@@ -213,3 +224,5 @@ class LoopClosureConfig:
         checks.at_least("loops_per_query", self.loops_per_query, 1)
         checks.positive("max_descriptor_distance", self.max_descriptor_distance)
         checks.non_negative("query_spacing_m", self.query_spacing_m)
+        checks.non_negative("recent_path_m", self.recent_path_m)
+        checks.non_negative("odometry_drift_fraction", self.odometry_drift_fraction, allow_inf=True)

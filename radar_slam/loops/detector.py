@@ -9,8 +9,10 @@ already closed by consecutive accepted loops is verified only once per
 `throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`). Each scan is handled once
 the next one is in (or at `finish`): its de-skew twist is the odometry's velocity interpolated to
 the middle of its sweep from the steps before and after it (`radar_slam.loops.sweep_twist`).
-Every verified proposal becomes a `LoopDecision` with its reason. `NullLoopDetector` has the same
-interface and does nothing.
+A scan joins the place database once the vehicle has driven `recent_path_m` past it, and a
+candidate the odometry places out of the verifier's reach is not verified
+(`radar_slam.loops.recent`). Every verified proposal becomes a `LoopDecision` with its reason.
+`NullLoopDetector` has the same interface and does nothing.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from odometry.velocity import Velocity
 from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
+from radar_slam.loops.recent import HeldBackDatabase, held_back_retrieval, within_reach
 from radar_slam.loops.records import (
     KeyScan,
     LoopClosureError,
@@ -42,7 +45,7 @@ from radar_slam.loops.sweep_twist import step_twist, sweep_twist
 from radar_slam.loops.throttle import StretchThrottle
 from radar_slam.loops.verification import GeometricVerifier, Verifier, mean_acquisition_offset_s
 from raplace.descriptor import DescriptorExtractor
-from raplace.retrieval import PlaceRecognizer, Recognizer
+from raplace.retrieval import Candidate, PlaceRecognizer, Recognizer
 from raplace.se2 import between
 from raplace.units import NS_PER_S
 
@@ -157,8 +160,16 @@ class LoopDetector:
         self.scan_loader = scan_loader
         self.describe = DescriptorExtractor(cfg.raplace.descriptor)
         self.recognizer: Recognizer = (
-            PlaceRecognizer(cfg.raplace.retrieval) if recognizer is None else recognizer
+            PlaceRecognizer(held_back_retrieval(cfg.raplace.retrieval, cfg.recent_path_m))
+            if recognizer is None
+            else recognizer
         )
+        # scans held back from the database until the vehicle is past them (own database only:
+        # a recognizer given is used with its own exclusion window, as it comes)
+        self._held_back: HeldBackDatabase | None = None
+        if recognizer is None and cfg.recent_path_m > 0:
+            exclusion = cfg.raplace.retrieval.exclusion
+            self._held_back = HeldBackDatabase(self.recognizer, cfg.recent_path_m, exclusion)
         self.verifier: Verifier = GeometricVerifier(cfg) if verifier is None else verifier
         self.gate = ConsistencyGate(cfg.consistency)
         self.throttle = StretchThrottle(cfg.throttle)
@@ -168,6 +179,7 @@ class LoopDetector:
         self._tally: Counter[str] = Counter()
         self._track = _Track()
         self.proposed = 0
+        self.out_of_reach = 0  # candidates the odometry placed out of the verifier's reach
 
     # -- results ------------------------------------------------------------------------------
     @property
@@ -216,6 +228,8 @@ class LoopDetector:
         """Query the last scan, then resolve the loops still pending (rejected: no support);
         returns the loops accepted by this call."""
         accepted = self._handle_held(after=None)
+        if self._held_back is not None:
+            self._held_back.flush()
         changes = self.gate.finish()
         self.throttle.resolved(changes)
         return accepted + self._apply(changes)
@@ -307,6 +321,29 @@ class LoopDetector:
         self.throttle.resolved(changes)
         return self._apply(changes)
 
+    def _reachable(self, held: _Held, candidates: list[Candidate]) -> list[Candidate]:
+        """The candidates the odometry does not place out of the verifier's reach (all of them
+        without poses, and those across an odometry step not trusted)."""
+        if held.pose is None or not candidates:
+            return candidates
+        matches = [self._entries[c.key] for c in candidates]
+        checked = [m.pose is not None and m.segment == held.segment for m in matches]
+        if not any(checked):
+            return candidates
+        poses = np.array([m.pose if m.pose is not None else held.pose for m in matches])
+        gaps = np.array([held.path_m - m.path_m for m in matches])
+        reach = within_reach(
+            held.pose,
+            poses,
+            gaps,
+            self.config.verification.max_translation_m,
+            self.config.odometry_drift_fraction,
+        )
+        keep = reach | ~np.array(checked)
+        kept = [c for c, ok in zip(candidates, keep, strict=True) if ok]
+        self.out_of_reach += len(candidates) - len(kept)
+        return kept
+
     def _scan_of(self, entry: _Entry) -> Scan:
         if entry.scan is not None:
             return entry.scan
@@ -322,12 +359,21 @@ class LoopDetector:
         scan, pose, key = held.scan, held.pose, held.key
         time_s = int(scan.timestamp_ns) / NS_PER_S
         descriptor = self.describe(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
-        candidates = [
-            c
-            for c in self.recognizer.query(descriptor, cfg.candidates, time_s)
-            if c.distance < cfg.max_descriptor_distance and c.key in self._entries
-        ]
-        self.recognizer.add(descriptor, key, time_s)
+        path_m = held.path_m if pose is not None else None
+        if self._held_back is not None:
+            self._held_back.release(time_s, path_m)
+        candidates = self._reachable(
+            held,
+            [
+                c
+                for c in self.recognizer.query(descriptor, cfg.candidates, time_s)
+                if c.distance < cfg.max_descriptor_distance and c.key in self._entries
+            ],
+        )
+        if self._held_back is not None:
+            self._held_back.hold(descriptor, key, time_s, path_m)
+        else:
+            self.recognizer.add(descriptor, key, time_s)
         entry = _Entry(
             key=key,
             timestamp_ns=int(scan.timestamp_ns),

@@ -214,13 +214,8 @@ def _join(pieces: list[_Piece]) -> PathSamples:
 def drive_route(
     town: Town, waypoints: list[tuple[int, int]], cfg: DrivingConfig, rng: np.random.Generator
 ) -> Trajectory:
-    """Drive a lattice route as `route.drive` does, turning round at its reversals.
-
-    Args:
-        town: the layout.
-        waypoints: lattice waypoints of the route (consecutive ones on one lattice line).
-        cfg: driving behaviour.
-        rng: draws the cruise speed of every street.
+    """Drive a lattice route as `route.drive` does (same arguments), turning round at its
+    reversals.
 
     Raises:
         RadarSlamError: a street of a reversal is too short or narrow for a turn-around.

@@ -9,7 +9,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from radar_slam.errors import RadarSlamError
 from radar_slam.sim.family import is_complete
 from radar_slam.sim.generate import SIM_VERSION, ego_drive, simulator_version
 from radar_slam.sim.kinematics import (
@@ -125,3 +127,10 @@ def test_only_the_changed_scenario_is_regenerated(tmp_path: Path) -> None:
         marker = {"simulator_version": version, "scenario": name, "complete": True}
         (folder / COMPLETE_MARKER).write_text(json.dumps(marker))
         assert is_complete(folder, name) is complete
+
+
+def test_a_reversal_too_close_to_the_start_is_rejected() -> None:
+    route = [(0, 1), (1, 1), (0, 1), (0, 2)]  # back after half a street: no room to turn
+    town = street_plan(SEED, SMALL_TOWN, route_edges(route))
+    with pytest.raises(RadarSlamError, match="too short"):
+        drive_route(town, route, DrivingConfig(), np.random.default_rng(SEED))

@@ -149,13 +149,16 @@ def _turn_around(
     local = integrate_legs((0.0, -pcfg.lane_offset_m, 0.0), legs, PATH_STEP_M, pcfg.gear_change_s)
     first = i_node - round(TURN_BEFORE_M / PATH_STEP_M)
     last = i_node - smoothing_reach(cfg) - 2  # the last sample the fold does not reach
+    too_short = RadarSlamError(
+        f"a {kind.replace('_', ' ')} does not fit between the route's start or the fold "
+        f"{TURN_BEFORE_M:.0f} m before a reversal: the street is too short"
+    )
+    if first < 0:
+        raise too_short
     station, points, direction, kappa = _street_frame(smooth, first, last)
     x, y, h = local.poses.T
-    if first < 0 or x.min() < 0.0 or x.max() > station[-1]:
-        raise RadarSlamError(
-            f"a {kind.replace('_', ' ')} does not fit between the route's start or the fold "
-            f"{TURN_BEFORE_M:.0f} m before a reversal: the street is too short"
-        )
+    if x.min() < 0.0 or x.max() > station[-1]:
+        raise too_short
     along = np.column_stack([np.interp(x, station, points[:, k]) for k in range(2)])
     theta = np.interp(x, station, direction)
     k_at = np.interp(x, station, kappa)
@@ -174,6 +177,8 @@ def _rejoin(lane: FloatArray, end: FloatArray, i_node: int, cfg: DrivingConfig) 
     reach = smoothing_reach(cfg)
     window = np.arange(i_node + reach + 2, i_node + round(2 * TURN_BEFORE_M / PATH_STEP_M))
     window = window[window < len(lane)]
+    if len(window) == 0:
+        raise RadarSlamError("the route ends before the way back after a turn-around")
     j = int(window[np.argmin(np.hypot(*(lane[window] - end).T))])
     gap = end - lane[j]
     logger.debug("turn-around rejoins the lane %.3f m off at sample %d", np.hypot(*gap), j)

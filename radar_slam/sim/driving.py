@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
-from radar_slam.sim.route import PATH_STEP_M, TIME_STEP_S, Trajectory
+from radar_slam.sim.route import PATH_STEP_M, TIME_STEP_S, Trajectory, limit_acceleration
 
 FloatArray = NDArray[np.float64]
 
@@ -204,14 +204,18 @@ def speed_profile(path: PathSamples, cfg: PlanDrivingConfig) -> FloatArray:
     if not np.all(np.isfinite(path.speed_limit)):
         raise RadarSlamError("every leg of a driving plan needs a finite speed limit")
     turn = np.sqrt(cfg.lateral_accel_mps2 / np.maximum(np.abs(path.curvature), 1e-9))
-    interval = np.minimum(path.speed_limit, turn)
-    v = np.minimum(np.append(interval, np.inf), np.insert(interval, 0, np.inf))
+    return limited_speeds(path, np.minimum(path.speed_limit, turn), cfg.accel_mps2, cfg.decel_mps2)
+
+
+def limited_speeds(
+    path: PathSamples, interval_cap: FloatArray, accel_mps2: float, decel_mps2: float
+) -> FloatArray:
+    """Speed magnitude (K,) at each sample of `path` [m/s]: the caps of the intervals on either
+    side (`interval_cap` (K - 1,) [m/s]), zero at stops, then acceleration and braking limits
+    [m/s^2] in both directions."""
+    v = np.minimum(np.append(interval_cap, np.inf), np.insert(interval_cap, 0, np.inf))
     v[path.stop] = 0.0
-    ds = np.diff(path.s)
-    for k in range(len(ds)):  # sequential by nature: each speed bounds the next
-        v[k + 1] = min(v[k + 1], math.sqrt(v[k] ** 2 + 2 * cfg.accel_mps2 * ds[k]))
-    for k in range(len(ds) - 1, -1, -1):
-        v[k] = min(v[k], math.sqrt(v[k + 1] ** 2 + 2 * cfg.decel_mps2 * ds[k]))
+    limit_acceleration(v, np.diff(path.s), accel_mps2, decel_mps2)
     return v
 
 

@@ -26,7 +26,7 @@ from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
 from radar_slam.datasets.registry import Family, family_folder, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
 from radar_slam.results import check_writable, pid_alive
-from radar_slam.sim.generate import SIM_VERSION, generate_sequence
+from radar_slam.sim.generate import generate_sequence, simulator_version
 from radar_slam.sim.scenarios import SCENARIOS
 from radar_slam.sim.writer import (
     COMPLETE_MARKER,
@@ -56,7 +56,9 @@ def is_complete(folder: Path, scenario: str | None = None) -> bool:
     """True when `folder` holds a completely written sequence of the current simulator version
     (and of `scenario`, when given)."""
     marker = _marker(folder)
-    if marker is None or marker.get("simulator_version") != SIM_VERSION:
+    if marker is None:
+        return False
+    if marker.get("simulator_version") != simulator_version(str(marker.get("scenario"))):
         return False
     if marker.get("complete", True) is not True:
         return False

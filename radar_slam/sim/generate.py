@@ -19,11 +19,12 @@ from numpy.typing import NDArray
 from radar_slam.errors import RadarSlamError
 from radar_slam.sim.manoeuvres import drive_plan, with_roundabout_islands
 from radar_slam.sim.render import Renderer
-from radar_slam.sim.route import Trajectory, drive, route_edges
+from radar_slam.sim.reversal import drive_route
+from radar_slam.sim.route import Trajectory, route_edges
 from radar_slam.sim.scatterers import World
 from radar_slam.sim.scenarios import Scenario
 from radar_slam.sim.town import Town
-from radar_slam.sim.townplan import generate_town
+from radar_slam.sim.townplan import generate_town, street_plan
 from radar_slam.sim.world import build_world
 from radar_slam.sim.writer import (
     COMPLETE_MARKER,
@@ -40,6 +41,9 @@ logger = logging.getLogger(__name__)
 SIM_VERSION = "1.2"
 """Bump when the output for a given scenario and seed changes (regenerates cached sequences).
 1.2: `reverse` became a figure-eight driven both ways (the other scenarios are unchanged)."""
+SCENARIO_VERSIONS: dict[str, str] = {"long_city": "1.3"}
+"""Scenarios whose output changed without the others' changing: only they are regenerated.
+1.3: `long_city` turns round at its route reversals (three-point turns, reversal.py)."""
 GT_PERIOD_NS = 10_000_000
 """global_pose.csv is sampled at 100 Hz, plus a row at every scan time [ns]."""
 ROUTE_STREAM, FRAME_STREAM = 2, 3
@@ -87,6 +91,11 @@ class Scene:
         return poses
 
 
+def simulator_version(scenario: str) -> str:
+    """Version of the simulator output of scenario `scenario` (written into its markers)."""
+    return SCENARIO_VERSIONS.get(scenario, SIM_VERSION)
+
+
 def frame_rng(scene: Scene, index: int) -> np.random.Generator:
     """The random stream of scan `index` (speckle, noise, ghost phases)."""
     return np.random.default_rng([scene.seed, scene.scenario.session, FRAME_STREAM, index])
@@ -106,13 +115,28 @@ def make_renderer(scene: Scene) -> Renderer:
 def lay_out(scenario: Scenario, seed: int) -> tuple[Town, Trajectory]:
     """The town of a scenario (with its route's streets protected) and the ego drive through it
     (smooth lattice drive, or the scenario's plan); no world contents, no rendering."""
-    protected = set().union(*(route_edges(list(r)) for r in scenario.town_routes))
-    town = generate_town(seed, scenario.town, protected)
+    town = generate_town(seed, scenario.town, _protected_edges(scenario))
+    if scenario.plan is not None:
+        town = with_roundabout_islands(town, list(scenario.waypoints), scenario.plan)
+    return town, _drive_through(scenario, town, seed)
+
+
+def ego_drive(scenario: Scenario, seed: int | None = None) -> Trajectory:
+    """The ego drive of `lay_out` (the same poses) through the town's streets alone: fast."""
+    seed = scenario.seed if seed is None else int(seed)
+    town = street_plan(seed, scenario.town, _protected_edges(scenario))
+    return _drive_through(scenario, town, seed)
+
+
+def _protected_edges(scenario: Scenario) -> set[frozenset[tuple[int, int]]]:
+    return set().union(*(route_edges(list(r)) for r in scenario.town_routes))
+
+
+def _drive_through(scenario: Scenario, town: Town, seed: int) -> Trajectory:
     route_rng = np.random.default_rng([seed, scenario.session, ROUTE_STREAM])
     if scenario.plan is None:
-        return town, drive(town, list(scenario.waypoints), scenario.driving, route_rng)
-    town = with_roundabout_islands(town, list(scenario.waypoints), scenario.plan)
-    return town, drive_plan(town, list(scenario.waypoints), scenario.plan, route_rng)
+        return drive_route(town, list(scenario.waypoints), scenario.driving, route_rng)
+    return drive_plan(town, list(scenario.waypoints), scenario.plan, route_rng)
 
 
 def build_scene(scenario: Scenario, seed: int | None = None) -> Scene:
@@ -202,7 +226,7 @@ def world_description(scene: Scene, summary: GeneratedSequence) -> dict[str, obj
     scenario = scene.scenario
     n_frames = summary.n_frames
     description: dict[str, object] = {
-        "simulator_version": SIM_VERSION,
+        "simulator_version": simulator_version(scenario.name),
         "scenario": scenario.name,
         "description": scenario.description,
         "seed": scene.seed,
@@ -272,7 +296,7 @@ def generate_sequence(
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     marker = {
-        "simulator_version": SIM_VERSION,
+        "simulator_version": simulator_version(scenario.name),
         "scenario": scenario.name,
         "seed": scene.seed,
         "frames": n_frames,

@@ -139,16 +139,40 @@ def _streets(town: Town, nodes: list[tuple[int, int]], cruise: FloatArray) -> li
     return streets
 
 
-def _u_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
+def turn_around_legs(
+    kind: Literal["u_turn", "three_point"],
+    half_width_m: float,
+    cruise_mps: float,
+    cfg: PlanDrivingConfig,
+) -> list[Leg]:
+    """Legs of a turn-around from the right lane of a straight street with a carriageway
+    `half_width_m` [m] wide either side of its centre line into the opposite lane, starting at
+    (0, -lane offset) heading along +x (street frame: x along it, y left) and ending heading
+    back at (x_end, +lane offset); `cruise_mps` [m/s] caps the lane changes before and after.
+
+    Raises:
+        RadarSlamError: the street is too narrow for the manoeuvre.
+    """
+    if kind == "u_turn":
+        return _u_turn(half_width_m, cruise_mps, cfg)
+    return _three_point_turn(half_width_m, cruise_mps, cfg)
+
+
+def fits_u_turn(half_width_m: float, cfg: PlanDrivingConfig) -> bool:
+    """A U-turn at full lock fits a carriageway `half_width_m` [m] wide either side."""
+    return cfg.lock_radius_m <= half_width_m - cfg.curb_clearance_m
+
+
+def _u_turn(half_width_m: float, cruise: float, cfg: PlanDrivingConfig) -> list[Leg]:
     """U-turn from the right lane into the opposite one: swing out, a half circle at full lock
     centred on the street's centre line, swing in."""
     radius, off = cfg.lock_radius_m, cfg.lane_offset_m
-    if radius > street.half_width_m - cfg.curb_clearance_m:
+    if not fits_u_turn(half_width_m, cfg):
         raise RadarSlamError(
-            f"a street {2 * street.half_width_m:.1f} m wide is too narrow for a U-turn on a "
+            f"a street {2 * half_width_m:.1f} m wide is too narrow for a U-turn on a "
             f"{radius:.1f} m radius: use a three-point turn"
         )
-    shift_r, cruise = 2 * cfg.lock_radius_m, street.cruise_mps
+    shift_r = 2 * cfg.lock_radius_m
     return [
         *lane_shift(-(radius - off), shift_r, cruise),
         arc(math.pi, radius, max_speed_mps=cfg.manoeuvre_speed_mps),
@@ -156,21 +180,19 @@ def _u_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
     ]
 
 
-def _three_point_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
+def _three_point_turn(half_width_m: float, cruise: float, cfg: PlanDrivingConfig) -> list[Leg]:
     """Three-point turn: pull over to the curb and stop, forward on left lock (up to straight
     across the street), reverse on right lock, forward on left lock, into the opposite lane."""
     radius, off, speed = cfg.lock_radius_m, cfg.lane_offset_m, cfg.manoeuvre_speed_mps
-    edge = street.half_width_m - cfg.curb_clearance_m
+    edge = half_width_m - cfg.curb_clearance_m
     a1 = min(math.pi / 2, math.acos(max(-1.0, 1.0 - 2 * edge / radius)))
     a2 = a3 = (math.pi - a1) / 2
     y1 = -edge + radius * (1 - math.cos(a1))
     y2 = y1 + radius * (math.cos(a1 + a2) - math.cos(a1))
     y3 = y2 + radius * (math.cos(a1 + a2) + 1)
     if max(abs(y1), abs(y2), abs(y3)) > edge + 1e-6:
-        raise RadarSlamError(
-            f"a three-point turn does not fit a {2 * street.half_width_m} m street"
-        )
-    pull_over = lane_shift(-(edge - off), 2 * radius, street.cruise_mps)
+        raise RadarSlamError(f"a three-point turn does not fit a {2 * half_width_m} m street")
+    pull_over = lane_shift(-(edge - off), 2 * radius, cruise)
     if pull_over:
         pull_over[-1] = replace(pull_over[-1], stop_s=MANOEUVRE_STOP_S)
     return [
@@ -178,11 +200,11 @@ def _three_point_turn(street: _Street, cfg: PlanDrivingConfig) -> list[Leg]:
         arc(a1, radius, max_speed_mps=speed),
         arc(a2, radius, gear=-1, max_speed_mps=min(speed, cfg.reverse_speed_mps)),
         arc(a3, radius, max_speed_mps=speed),
-        *lane_shift(y3 - off, 2 * radius, street.cruise_mps),
+        *lane_shift(y3 - off, 2 * radius, cruise),
     ]
 
 
-def _local_end(legs: list[Leg], cfg: PlanDrivingConfig) -> tuple[float, float, float]:
+def local_end(legs: list[Leg], cfg: PlanDrivingConfig) -> tuple[float, float, float]:
     """End pose of `legs` driven from (0, -lane offset, 0): longitudinal, lateral, heading."""
     pose = (0.0, -cfg.lane_offset_m, 0.0)
     for leg in legs:
@@ -225,8 +247,8 @@ def _junction(
         if not turn_around:
             raise RadarSlamError(f"the route turns back at node {k + 1}: add a TurnAround event")
         event = turn_around[0]
-        legs = _u_turn(here, cfg) if event.kind == "u_turn" else _three_point_turn(here, cfg)
-        x_end, y_end, h_end = _local_end(legs, cfg)
+        legs = turn_around_legs(event.kind, here.half_width_m, here.cruise_mps, cfg)
+        x_end, y_end, h_end = local_end(legs, cfg)
         assert abs(y_end - cfg.lane_offset_m) < 1e-6 and abs(h_end - math.pi) < 1e-6
         return here.length_m - event.before_m, legs, event.before_m - x_end
     if abs(turn) < STRAIGHT_THROUGH_RAD:

@@ -11,6 +11,7 @@ vehicle base (x forward, y left) in the town frame; the radar is mounted at
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,8 @@ PATH_STEP_M = 0.1
 """Arc-length sampling of the smoothed path [m]."""
 TIME_STEP_S = 0.002
 """Time sampling of the stored trajectory; poses in between are interpolated linearly [s]."""
+SMOOTHING_TRUNCATE = 4.0
+"""The centre-line Gaussian is cut off at this many sigmas (scipy's default)."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +107,12 @@ def route_edges(waypoints: list[tuple[int, int]]) -> set[frozenset[tuple[int, in
     return {frozenset({a, b}) for a, b in zip(nodes[:-1], nodes[1:], strict=True)}
 
 
+def path_heading(path: FloatArray) -> FloatArray:
+    """Unwrapped direction of travel [rad] (K,) along a path (K, 2) [m] driven forwards."""
+    d = np.gradient(path, axis=0)
+    return np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+
+
 def route_centre_line(
     town: Town, waypoints: list[tuple[int, int]]
 ) -> tuple[FloatArray, list[float]]:
@@ -128,19 +137,59 @@ def route_centre_line(
     return line[keep], boundaries
 
 
+def limit_acceleration(v: FloatArray, ds: FloatArray, accel_mps2: float, decel_mps2: float) -> None:
+    """Lower the speeds `v` (K,) [m/s] in place so that no step of length `ds` (K - 1,) [m]
+    accelerates faster than `accel_mps2` or brakes harder than `decel_mps2` [m/s^2]."""
+    for k in range(len(ds)):  # sequential by nature: each speed bounds the next
+        v[k + 1] = min(v[k + 1], math.sqrt(v[k] ** 2 + 2 * accel_mps2 * ds[k]))
+    for k in range(len(ds) - 1, -1, -1):
+        v[k] = min(v[k], math.sqrt(v[k + 1] ** 2 + 2 * decel_mps2 * ds[k]))
+
+
+def speed_cap(curvature: FloatArray, cruise: FloatArray, cfg: DrivingConfig) -> FloatArray:
+    """The smooth drive's speed cap [m/s] at curvatures `curvature` [1/m] and cruise speeds
+    `cruise` [m/s]: the cruise speed, lowered by the lateral acceleration limit in turns, never
+    below the minimum speed."""
+    turn_limit = np.sqrt(cfg.lateral_accel_mps2 / np.maximum(np.abs(curvature), 1e-6))
+    return np.clip(np.minimum(cruise, turn_limit), cfg.min_speed_mps, None)
+
+
 def _speed_profile(
     s: FloatArray, curvature: FloatArray, cruise: FloatArray, cfg: DrivingConfig
 ) -> FloatArray:
     """Speed at each arc length: cruise and turn limits, then acceleration limits both ways."""
-    turn_limit = np.sqrt(cfg.lateral_accel_mps2 / np.maximum(np.abs(curvature), 1e-6))
-    v = np.clip(np.minimum(cruise, turn_limit), cfg.min_speed_mps, None)
-    ds = np.diff(s)
+    v = speed_cap(curvature, cruise, cfg)
     v[0] = min(v[0], cfg.min_speed_mps)
-    for k in range(len(ds)):  # sequential by nature: each speed bounds the next
-        v[k + 1] = min(v[k + 1], np.sqrt(v[k] ** 2 + 2 * cfg.accel_mps2 * ds[k]))
-    for k in range(len(ds) - 1, -1, -1):
-        v[k] = min(v[k], np.sqrt(v[k + 1] ** 2 + 2 * cfg.decel_mps2 * ds[k]))
+    limit_acceleration(v, np.diff(s), cfg.accel_mps2, cfg.decel_mps2)
     return np.maximum(v, cfg.min_speed_mps)
+
+
+def smoothed_centre_line(centre: FloatArray, cfg: DrivingConfig) -> FloatArray:
+    """The route's centre line (K, 2) [m], sampled every PATH_STEP_M, smoothed along its
+    length by a Gaussian of `cfg.smoothing_m` (corners become turns); same K samples."""
+    sigma = cfg.smoothing_m / PATH_STEP_M
+    return np.stack(
+        [
+            gaussian_filter1d(centre[:, k], sigma, mode="nearest", truncate=SMOOTHING_TRUNCATE)
+            for k in range(2)
+        ],
+        axis=1,
+    )
+
+
+def smoothing_reach(cfg: DrivingConfig) -> int:
+    """Samples either side of a centre-line sample that its smoothed value depends on."""
+    return int(SMOOTHING_TRUNCATE * cfg.smoothing_m / PATH_STEP_M + 0.5)
+
+
+def cruise_speeds(
+    s: FloatArray, boundaries: list[float], cfg: DrivingConfig, rng: np.random.Generator
+) -> FloatArray:
+    """Cruise speed [m/s] at arc lengths `s` [m], drawn per street (street boundaries at
+    `boundaries` [m], from `route_centre_line`)."""
+    edges = np.concatenate([[0.0], boundaries, [np.inf]])
+    cruise_per_street = rng.uniform(*cfg.cruise_speed_mps, len(edges) - 1)
+    return cruise_per_street[np.searchsorted(edges, s, side="right") - 1]
 
 
 def drive(
@@ -155,18 +204,12 @@ def drive(
         rng: draws the cruise speed of every street.
     """
     centre, boundaries = route_centre_line(town, waypoints)
-    sigma = cfg.smoothing_m / PATH_STEP_M
-    smooth = np.stack(
-        [gaussian_filter1d(centre[:, k], sigma, mode="nearest") for k in range(2)], axis=1
-    )
+    smooth = smoothed_centre_line(centre, cfg)
     path = resample_polyline(offset_polyline(smooth, -cfg.lane_offset_m), PATH_STEP_M)
-    d = np.gradient(path, axis=0)
-    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    heading = path_heading(path)
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
     curvature = np.gradient(heading, s)
-    edges = np.concatenate([[0.0], boundaries, [np.inf]])
-    cruise_per_street = rng.uniform(*cfg.cruise_speed_mps, len(edges) - 1)
-    cruise = cruise_per_street[np.searchsorted(edges, s, side="right") - 1]
+    cruise = cruise_speeds(s, boundaries, cfg, rng)
     v = _speed_profile(s, curvature, cruise, cfg)
     t = np.concatenate([[0.0], np.cumsum(np.diff(s) / (0.5 * (v[1:] + v[:-1])))])
     t_grid = np.arange(0.0, t[-1], TIME_STEP_S)

@@ -251,19 +251,11 @@ def _parks(rng: np.random.Generator, cfg: TownConfig, raster: Raster) -> FloatAr
     return np.column_stack([centres, axes, yaw])[ok]
 
 
-def generate_town(
-    seed: int, cfg: TownConfig, protected_edges: set[frozenset[tuple[int, int]]] | None = None
-) -> Town:
-    """Lay out a town from `seed`.
-
-    Args:
-        seed: seed of every random draw of the layout.
-        cfg: layout parameters.
-        protected_edges: lattice edges {(i, j), (i', j')} that must exist and stay straight
-            (the routes of a scenario drive on them).
-    """
-    rng = np.random.default_rng(seed)
-    protected = protected_edges or set()
+def _street_network(
+    rng: np.random.Generator, cfg: TownConfig, protected: set[frozenset[tuple[int, int]]]
+) -> tuple[FloatArray, NDArray[np.int64], list[Road]]:
+    """Node positions (N, 2) [m], their lattice indices (N, 2) and the streets: the first
+    draws of `rng` for a town."""
     lattice, lattice_pos, edges = street_lattice(rng, cfg, protected)
     warp = make_warp(rng, cfg)
     nodes = warp(lattice_pos)
@@ -284,6 +276,49 @@ def generate_town(
                 sidewalk_m=uniform_in(rng, cfg.sidewalk_m),
             )
         )
+    return nodes, lattice, roads
+
+
+def street_plan(
+    seed: int, cfg: TownConfig, protected_edges: set[frozenset[tuple[int, int]]] | None = None
+) -> Town:
+    """The streets of the town `generate_town` lays out from the same arguments, without
+    buildings, street furniture or vegetation (enough to drive a route through: fast)."""
+    nodes, lattice, roads = _street_network(
+        np.random.default_rng(seed), cfg, protected_edges or set()
+    )
+    none = np.zeros((0, 4))
+    return Town(
+        nodes=nodes,
+        lattice=lattice,
+        roads=roads,
+        buildings=[],
+        curbs=none,
+        guard_rails=none,
+        fences=none,
+        hedges=np.zeros((0, 2)),
+        clutter=np.zeros((0, 2)),
+        poles=np.zeros((0, 2)),
+        street_trees=np.zeros((0, 2)),
+        parks=np.zeros((0, 5)),
+        parking=np.zeros((0, 3)),
+        raster=Raster(np.zeros((1, 1), dtype=np.uint8), 0.0, 0.0, cfg.raster_cell_m),
+    )
+
+
+def generate_town(
+    seed: int, cfg: TownConfig, protected_edges: set[frozenset[tuple[int, int]]] | None = None
+) -> Town:
+    """Lay out a town from `seed`.
+
+    Args:
+        seed: seed of every random draw of the layout.
+        cfg: layout parameters.
+        protected_edges: lattice edges {(i, j), (i', j')} that must exist and stay straight
+            (the routes of a scenario drive on them).
+    """
+    rng = np.random.default_rng(seed)
+    nodes, lattice, roads = _street_network(rng, cfg, protected_edges or set())
     all_pts = np.concatenate([r.polyline for r in roads])
     lo = all_pts.min(axis=0) - WORLD_MARGIN_M
     hi = all_pts.max(axis=0) + WORLD_MARGIN_M

@@ -75,6 +75,10 @@ class ResultHistory:
         """One result per scan, in order."""
         return list(self._results)
 
+    def __getitem__(self, index: int) -> OdometryResult:
+        """Scan `index`'s result (revised unless it is the last)."""
+        return self._results[index]
+
     def append(self, result: OdometryResult) -> None:
         """Add the next scan's prompt result, its motions re-chained to the history's poses."""
         if self._results:

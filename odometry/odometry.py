@@ -117,6 +117,11 @@ class Odometry:
         `odometry.history`)."""
         return self._state.history.results
 
+    def result(self, index: int) -> OdometryResult:
+        """Scan `index`'s result as in `results` (revised once the next scan has registered),
+        without copying the list."""
+        return self._state.history[index]
+
     @property
     def poses(self) -> FloatArray:
         """(N, 3) T_world_radar of every registered scan (as in `results`)."""

@@ -38,6 +38,7 @@ import time
 import numpy as np
 
 from odometry import Odometry, OdometryResult
+from odometry.registration import PreparedScan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import LoopConstraint, PoseGraph
@@ -131,15 +132,20 @@ class Pipeline:
         self._start = time.perf_counter()
         reader = ScanReader(self._read_scan, self.frames, self.config.concurrency.read_ahead_scans)
         try:
+            held: tuple[RadarFrame, PreparedScan | None] | None = None
             for index in range(self.frames):
                 frame = self._read(reader)
                 result = self._track(frame)
                 self._extend_graph(result)
-                self.loops.submit(frame, result.pose, result.index, self.odometry.prepared)  # 15V
+                if held is not None:
+                    self._submit(*held, index - 1)
+                held = (frame, self.odometry.prepared)  # 15V: its conditioned scan
                 self._close_loops(self.loops.due(index), index)
                 self._report(index + 1)
                 if self.observer is not None:
                     self.observer.on_scan(self, frame, result)
+            if held is not None:
+                self._submit(*held, self.frames - 1)
             self._close_loops(self.loops.finish(), None)
         finally:
             reader.close()
@@ -165,6 +171,12 @@ class Pipeline:
             result = self.odometry.register(frame)
         self._results.append(result)
         return result
+
+    def _submit(self, frame: RadarFrame, prepared: PreparedScan | None, index: int) -> None:
+        """Hand scan `index` to the loop detector once the next scan has registered, with its
+        revised pose: the prompt pose of a scan swept across a yaw-rate step can be off by tens
+        of deg/s in the velocity the detector de-skews it with (the last scan: its prompt pose)."""
+        self.loops.submit(frame, self.odometry.result(index).pose, index, prepared)
 
     def _extend_graph(self, result: OdometryResult) -> None:
         with self.timer("graph"):

@@ -72,16 +72,17 @@ class HeldBackDatabase:
 
     def release(self, time_s: float, path_m: float | None) -> None:
         """Move into the database every held scan a query at `time_s` / `path_m` may match."""
-        pending = self._pending
-        while pending and self._due(pending[0], time_s, path_m):
-            entry = pending.popleft()
-            self.database.add(entry.descriptor, entry.key, entry.time_s)
+        while self._pending and self._due(self._pending[0], time_s, path_m):
+            self._admit_oldest()
 
     def flush(self) -> None:
         """Move every held scan into the database (after the last query)."""
         while self._pending:
-            entry = self._pending.popleft()
-            self.database.add(entry.descriptor, entry.key, entry.time_s)
+            self._admit_oldest()
+
+    def _admit_oldest(self) -> None:
+        entry = self._pending.popleft()
+        self.database.add(entry.descriptor, entry.key, entry.time_s)
 
     def _due(self, entry: _Pending, time_s: float, path_m: float | None) -> bool:
         if entry.path_m is not None and path_m is not None:

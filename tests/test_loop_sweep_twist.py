@@ -11,9 +11,15 @@ import pytest
 
 from odometry.config import OdometryConfig
 from odometry.deskew import twist_from_motion
+from odometry.history import OdometryResult
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.loops import KeyScan, LoopClosureConfig, LoopDetector, Verification
-from radar_slam.loops.sweep_twist import step_twist, sweep_twist
+from radar_slam.loops.sweep_twist import (
+    scan_sweep_twist,
+    step_twist,
+    step_velocities,
+    sweep_twist,
+)
 from raplace.retrieval import Candidate
 from raplace.se2 import between
 from raplace.units import NS_PER_S
@@ -99,6 +105,57 @@ def test_an_implausible_step_is_not_used() -> None:
     twist = sweep_twist(before.velocity, jump.velocity, ns(t_s - SWEEP_S / 2))
     np.testing.assert_array_equal(twist, before.velocity.twist)
     assert sweep_twist(None, None, ns(t_s)) is None
+
+
+def odometry_run(times_s: list[float]) -> list[OdometryResult]:
+    """Exact odometry results of scans at `times_s` on the accelerating arc."""
+    results = []
+    for n, t_s in enumerate(times_s):
+        motion = np.zeros(3) if n == 0 else step(times_s[n - 1], t_s)
+        results.append(
+            OdometryResult(
+                n,
+                ns(t_s),
+                arc_pose(t_s),
+                motion,
+                np.eye(3) * 1e-4,
+                max(n - 1, 0),
+                motion,
+                True,
+                True,
+                False,
+                10.0,
+                "",
+            )
+        )
+    return results
+
+
+class SweptScan:
+    """The timing of a scan stamped at the end of a 400-azimuth sweep (what the twist needs)."""
+
+    def __init__(self, t_s: float) -> None:
+        self.timestamp_ns = ns(t_s)
+        offsets_s = (np.arange(400) + 0.5) / 400 * SWEEP_S - SWEEP_S
+        self.azimuth_times_ns = ns(t_s) + np.round(offsets_s * NS_PER_S).astype(np.int64)
+
+
+def test_a_whole_run_gives_each_scan_its_mid_sweep_twist() -> None:
+    # What maps use: the twists of every scan of a finished run at 1 Hz.
+    times_s = [2.0, 3.0, 4.0, 5.0]
+    velocities = step_velocities(odometry_run(times_s), LIMITS)
+    assert velocities[0] is None and all(v is not None for v in velocities[1:])
+    for n in (1, 2):
+        twist = scan_sweep_twist(velocities, n, SweptScan(times_s[n]))  # type: ignore[arg-type]
+        np.testing.assert_allclose(twist, true_sweep_twist(times_s[n] - SWEEP_S / 2), atol=1e-6)
+    # The last scan has no step after it: the step before, which lags its sweep by 3/8 s.
+    last = scan_sweep_twist(velocities, 3, SweptScan(times_s[3]))  # type: ignore[arg-type]
+    assert last is not None and velocities[3] is not None
+    np.testing.assert_array_equal(last, velocities[3].twist)
+    assert last[0] == pytest.approx(true_sweep_twist(times_s[3] - SWEEP_S / 2)[0] - 3 / 8, abs=1e-6)
+    first = scan_sweep_twist(velocities, 0, SweptScan(times_s[0]))  # type: ignore[arg-type]
+    assert first is not None and velocities[1] is not None
+    np.testing.assert_array_equal(first, velocities[1].twist)
 
 
 class EveryEntry:

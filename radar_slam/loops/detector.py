@@ -41,9 +41,9 @@ from radar_slam.loops.records import (
     LoopStatus,
     VerifiedLoop,
 )
-from radar_slam.loops.sweep_twist import step_twist, sweep_twist
+from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_twist, sweep_twist
 from radar_slam.loops.throttle import StretchThrottle
-from radar_slam.loops.verification import GeometricVerifier, Verifier, mean_acquisition_offset_s
+from radar_slam.loops.verification import GeometricVerifier, Verifier
 from raplace.descriptor import DescriptorExtractor
 from raplace.retrieval import Candidate, PlaceRecognizer, Recognizer
 from raplace.se2 import between
@@ -309,7 +309,7 @@ class LoopDetector:
         track = self._track
         twist = None
         if held.pose is not None:
-            twist = sweep_twist(held.before, after, _mean_time_ns(held.scan))
+            twist = sweep_twist(held.before, after, mean_acquisition_time_ns(held.scan))
         changes: dict[int, LoopStatus] = {}
         if held.pose is not None:
             changes.update(self.gate.expire(held.path_m))
@@ -446,13 +446,6 @@ class LoopDetector:
             if status == "accepted":
                 accepted.append(new.constraint())
         return accepted
-
-
-def _mean_time_ns(scan: Scan) -> int:
-    """The scan's mean acquisition time [ns] (its reference time without azimuth times)."""
-    offset_s = mean_acquisition_offset_s(scan)
-    offset_ns = 0 if offset_s is None else round(offset_s * NS_PER_S)
-    return int(scan.timestamp_ns) + offset_ns
 
 
 def _scan_bytes(scan: Scan) -> int:

@@ -21,6 +21,7 @@ odometry step not to be trusted; its twist is not used (the other side's is, alo
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,9 +29,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from odometry.config import OdometryConfig
 from odometry.deskew import twist_from_motion
+from odometry.history import OdometryResult
 from odometry.recovery import plausible_twist
 from odometry.reference_time import interpolated_twist
+from odometry.scan import Scan
 from odometry.velocity import Velocity
+from radar_slam.loops.verification import mean_acquisition_offset_s
 from raplace.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
@@ -63,6 +67,13 @@ def step_twist(motion: ArrayLike, start_ns: int, end_ns: int, limits: OdometryCo
     return StepTwist(Velocity(twist=twist, time_ns=(start_ns + end_ns) // 2), True)
 
 
+def mean_acquisition_time_ns(scan: Scan) -> int:
+    """The scan's mean acquisition time [ns] (its reference time without azimuth times)."""
+    offset_s = mean_acquisition_offset_s(scan)
+    offset_ns = 0 if offset_s is None else round(offset_s * NS_PER_S)
+    return int(scan.timestamp_ns) + offset_ns
+
+
 def sweep_twist(
     before: Velocity | None, after: Velocity | None, mean_time_ns: int
 ) -> FloatArray | None:
@@ -76,3 +87,25 @@ def sweep_twist(
         assert known is not None
         return np.asarray(known.twist, dtype=np.float64).copy()
     return interpolated_twist(before, after, mean_time_ns)
+
+
+def step_velocities(
+    results: Sequence[OdometryResult], limits: OdometryConfig
+) -> list[Velocity | None]:
+    """Entry n: the velocity of the odometry step from scan n - 1 into scan n (`step_twist`;
+    None for the first scan, a step of no duration, or one beyond the vehicle's limits)."""
+    velocities: list[Velocity | None] = [None] * len(results)
+    for n in range(1, len(results)):
+        start_ns, end_ns = int(results[n - 1].timestamp_ns), int(results[n].timestamp_ns)
+        if end_ns > start_ns:
+            velocities[n] = step_twist(results[n].motion, start_ns, end_ns, limits).velocity
+    return velocities
+
+
+def scan_sweep_twist(
+    velocities: Sequence[Velocity | None], n: int, scan: Scan
+) -> FloatArray | None:
+    """(3,) twist of scan `n` during its sweep, from `step_velocities` of the whole run (the
+    steps into and out of the scan; None when neither is known)."""
+    after = velocities[n + 1] if n + 1 < len(velocities) else None
+    return sweep_twist(velocities[n], after, mean_acquisition_time_ns(scan))

@@ -19,11 +19,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry import OdometryConfig, OdometryResult
-from odometry.deskew import twist_from_motion
+from odometry.velocity import Velocity
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import TrajectoryError
 from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
 from radar_slam.loops import LoopDecision
+from radar_slam.loops.sweep_twist import scan_sweep_twist, step_velocities
 from radar_slam.maps.config import MapsConfig
 from radar_slam.maps.format import EDGE_DTYPE, EDGE_KINDS, KEYFRAME_DTYPE, Map, Session
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
@@ -31,7 +32,6 @@ from radar_slam.trajectory import Trajectory
 from raplace.config import DescriptorConfig
 from raplace.descriptor import DescriptorExtractor
 from raplace.se2 import between, compose, rotate_covariance
-from raplace.units import NS_PER_S
 
 if TYPE_CHECKING:
     from radar_slam.pipeline import Results
@@ -57,19 +57,6 @@ def select_keyframes(poses: FloatArray, spacing_m: float) -> NDArray[np.int64]:
             chosen.append(n)
             travelled = 0.0
     return np.asarray(chosen, dtype=np.int64)
-
-
-def scan_twists(results: list[OdometryResult]) -> list[FloatArray | None]:
-    """Body twist (vx, vy [m/s], yaw rate [rad/s]) of every scan from the odometry motions
-    (the first scan takes the second's; None for a single scan)."""
-    twists: list[FloatArray | None] = [None] * len(results)
-    for n in range(1, len(results)):
-        dt_s = (results[n].timestamp_ns - results[n - 1].timestamp_ns) / NS_PER_S
-        if dt_s > 0:
-            twists[n] = twist_from_motion(results[n].motion, dt_s)
-    if len(results) > 1:
-        twists[0] = twists[1]
-    return twists
 
 
 def information_upper(covariance: FloatArray) -> FloatArray:
@@ -145,20 +132,22 @@ def map_settings(cfg: MapsConfig, descriptor: DescriptorConfig) -> dict[str, Any
 def describe_keyframes(
     sequence: RadarSequence,
     scans: NDArray[np.int64],
-    twists: list[FloatArray | None],
+    velocities: list[Velocity | None],
     image: ImageGeometry,
     odometry: OdometryConfig,
     descriptor: DescriptorConfig,
 ) -> tuple[NDArray[np.float16], list[bytes], NDArray[np.float32]]:
-    """Read the keyframe scans again: (K, n_theta, n_freq) float16 descriptors, PNG images and
-    their intensity scales."""
+    """Read the keyframe scans again: (K, n_theta, n_freq) float16 descriptors, PNG images
+    (de-skewed with each scan's sweep twist from the run's `step_velocities`) and their
+    intensity scales."""
     describe = DescriptorExtractor(descriptor)
     imager = KeyframeImager(image, odometry)
     descriptors, images, scales = [], [], []
     for scan in scans:
         frame = sequence[int(scan)]
         descriptors.append(describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m))
-        png, scale = imager.encode(imager.image(frame, twists[int(scan)]))
+        twist = scan_sweep_twist(velocities, int(scan), frame)
+        png, scale = imager.encode(imager.image(frame, twist))
         images.append(png)
         scales.append(scale)
     shape = (len(scans), *describe.shape)
@@ -200,9 +189,9 @@ def build_map(results: Results, sequence: RadarSequence, poses: FloatArray | Non
     descriptor_cfg = results.config.loop_closure.raplace.descriptor
     slam = results.slam if poses is None else Trajectory(results.slam.timestamps_ns, poses)
     scans = select_keyframes(slam.poses, cfg.keyframe_spacing_m)
-    twists = scan_twists(results.odometry_results)
+    velocities = step_velocities(results.odometry_results, results.config.odometry)
     descriptors, images, scales = describe_keyframes(
-        sequence, scans, twists, cfg.image, results.config.odometry, descriptor_cfg
+        sequence, scans, velocities, cfg.image, results.config.odometry, descriptor_cfg
     )
     stamps = slam.timestamps_ns
     keyframes = keyframe_rows(0, scans, stamps, slam.poses, results.ground_truth_poses, scales)

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from odometry.velocity import Velocity
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import PoseGraph
@@ -42,6 +43,7 @@ from radar_slam.loops import (
     LoopStatus,
     VerifiedLoop,
 )
+from radar_slam.loops.sweep_twist import scan_sweep_twist, step_velocities
 from radar_slam.maps.build import (
     EDGE_KINDS,
     build_map,
@@ -49,7 +51,6 @@ from radar_slam.maps.build import (
     edge_rows,
     information_upper,
     keyframe_rows,
-    scan_twists,
     select_keyframes,
 )
 from radar_slam.maps.format import EDGE_DTYPE, Map, Session
@@ -126,14 +127,14 @@ class InterSessionDetector:
         poses = results.slam.poses
         steps = np.r_[0.0, np.hypot(*np.diff(poses[:, :2], axis=0).T)]
         path = np.cumsum(steps)
-        twists = scan_twists(results.odometry_results)
+        velocities = step_velocities(results.odometry_results, results.config.odometry)
         last_query = -np.inf
         for n in range(len(poses)):
             self._apply(self.gate.expire(float(path[n])))
             if path[n] - last_query < self.cfg.query_spacing_m:
                 continue
             last_query = float(path[n])
-            self._query(n, sequence, poses[n], float(path[n]), twists[n])
+            self._query(n, sequence, poses[n], float(path[n]), velocities)
         self._apply(self.gate.finish())
         return self.decisions
 
@@ -143,10 +144,11 @@ class InterSessionDetector:
         sequence: RadarSequence,
         pose: FloatArray,
         path_m: float,
-        twist: FloatArray | None,
+        velocities: list[Velocity | None],
     ) -> None:
         cfg = self.cfg
         frame = sequence[n]
+        twist = scan_sweep_twist(velocities, n, frame)
         descriptor = self.describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
         candidates = [
             c
@@ -241,7 +243,7 @@ def extended_map(
     descriptors, images, scales = describe_keyframes(
         sequence,
         scans,
-        scan_twists(results.odometry_results),
+        step_velocities(results.odometry_results, config.odometry),
         image_geometry_of(m),
         config.odometry,
         descriptor_config_of(m, config.loop_closure.raplace.descriptor),

@@ -246,7 +246,9 @@ class GeometricVerifier:
     ) -> Verification:
         """The phase-correlation half of the verification (b and c of the module docstring)
         from an initial T_query_match (3,): the sinogram estimate (`__call__`), or a prediction
-        (`initial_quality` NaN; `radar_slam.loops.tracking`). Never raises for a bad match."""
+        (`initial_quality` NaN; `radar_slam.loops.tracking`), which also seeds the registration
+        (its coarse peak searched within `refinement.translation.hint_radius_m` of the
+        prediction). Never raises for a bad match."""
         vcfg = self.cfg.verification
         nan3 = np.full(3, np.nan)
         nan33 = np.full((3, 3), np.nan)
@@ -261,7 +263,10 @@ class GeometricVerifier:
         aligned = prepare(
             turned(match.scan, turn), self.cfg.refinement, turned_twist(match.twist, turn)
         )
-        estimate = register(self._prepared_query(query), aligned, self.cfg.refinement)
+        # A prediction also seeds the registration (its translation; the match is turned by its
+        # rotation): one rotation and half-turn hypothesis instead of a global search.
+        hint = None if np.isfinite(initial_quality) else np.array([initial[0], initial[1], 0.0])
+        estimate = register(self._prepared_query(query), aligned, self.cfg.refinement, hint)
         refined = compose(estimate.motion, np.array([0.0, 0.0, turn]))
         if not estimate.ok:
             return failed(f"phase correlation failed: {estimate.reason}", nan3, estimate.quality)

@@ -6,7 +6,9 @@ below `max_descriptor_distance`, verifies each proposal, best first, until one p
 (`radar_slam.loops.verification`), and, with poses, accepts a verified loop once another loop
 nearby agrees with it (`radar_slam.loops.consistency`); with poses too, a query on a stretch
 already closed by consecutive accepted loops is verified only once per
-`throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`). Each scan is handled once
+`throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`), and a candidate on such a
+stretch is checked from the loop its latest one predicts (`radar_slam.loops.tracking`; in full
+when that check fails). Each scan is handled once
 the next one is in (or at `finish`): its de-skew twist is the odometry's velocity interpolated to
 the middle of its sweep from the steps before and after it (`radar_slam.loops.sweep_twist`).
 A scan joins the place database once the vehicle has driven `recent_path_m` past it, and a

@@ -11,6 +11,9 @@ returns to full rate: a candidate off the stretch is verified as usual, and a fa
 verification on the stretch, a rejected loop, or `max_gap_m` of travel without an accepted loop
 on it ends the stretch.
 
+`anchor` names the latest loop of the closed stretch a candidate lies on, from which the loop
+detector predicts the candidate's loop (`radar_slam.loops.tracking`).
+
 Skipping only ever removes verifications, so it cannot add a false loop; the consistency gate
 (`radar_slam.loops.consistency`) still sees a loop every `closed_spacing_m`, well inside its
 support window.

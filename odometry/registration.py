@@ -220,10 +220,16 @@ def _residual_rotation(
     return refine_rotation_against(ref.refine_spectrum, moved, cfg.rotation)
 
 
-def register(ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig) -> MotionEstimate:
+def register(
+    ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig, hint: FloatArray | None = None
+) -> MotionEstimate:
     """Pose of `cur` in the frame of `ref` between their reference times (see the module
-    docstring): `register_images` moved from the image frames to the reference frames."""
-    estimate = register_images(ref, cur, cfg)
+    docstring): `register_images` moved from the image frames to the reference frames; `hint`
+    (3,) a predicted pose between the reference times, as `register_images`' hint."""
+    image_hint = None  # issue 15d: a hint between the reference times (loop checks)
+    if hint is not None:
+        image_hint = compose(compose(inverse(ref.image_pose), hint), cur.image_pose)
+    estimate = register_images(ref, cur, cfg, image_hint)
     return dataclasses.replace(
         estimate,
         motion=image_to_reference(estimate.motion, ref, cur),

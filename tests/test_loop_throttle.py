@@ -129,3 +129,19 @@ def test_a_third_drive_keeps_a_stretch_per_earlier_drive() -> None:
 def test_direction_from_the_loop_yaw() -> None:
     assert direction_of(0.3) == 1 and direction_of(-0.3) == 1
     assert direction_of(np.pi - 0.2) == -1 and direction_of(-np.pi + 0.2) == -1
+
+
+def test_anchor_is_the_latest_loop_of_the_closed_stretch_the_match_lies_on() -> None:
+    cfg = ThrottleConfig(closed_after=3, closed_spacing_m=20.0)
+    sim = Simulation(cfg)
+    throttle = sim.throttle
+    revisit(sim, 8.0)  # two loops: the stretch is not closed yet
+    assert throttle.stretches and throttle.anchor(1012.0, 12.0 / SCALE) is None
+    revisit(sim, 100.0)
+    (stretch,) = throttle.stretches
+    assert stretch.decision == sim.decisions - 1  # every verification passed
+    q = stretch.query_path_m + 20.0
+    on = stretch.match_path_m + 20.0 / SCALE
+    assert throttle.anchor(q, on) == stretch.decision
+    assert throttle.anchor(q, on + 50.0) is None  # off the stretch
+    assert throttle.anchor(q, stretch.match_path_m - 20.0) is None  # the other way along it

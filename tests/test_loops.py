@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from odometry.registration import prepare, register
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import GraphConfig, PoseGraph
@@ -22,12 +23,15 @@ from radar_slam.loops import (
     LoopDetector,
     NullLoopDetector,
     ThrottleConfig,
+    Verification,
     VerifiedLoop,
+    Verifier,
     cycle_mahalanobis,
     loop_covariance,
     make_loop_detector,
     motion_compensated,
 )
+from radar_slam.loops.tracking import predicted_loop
 from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.scenarios import get_scenario
@@ -347,7 +351,9 @@ class Revisit:
     wrong_key: int  # the candidate forced into one query
 
 
-def run_revisit(tiny: RadarSequence, cfg: LoopClosureConfig) -> Revisit:
+def run_revisit(
+    tiny: RadarSequence, cfg: LoopClosureConfig, verifier: Verifier | None = None
+) -> Revisit:
     """The tiny drive, then its first half again (every other scan, so the scans differ from
     the first pass) a lap later, with ground-truth poses; one wrong candidate is forced into the
     queries."""
@@ -367,7 +373,7 @@ def run_revisit(tiny: RadarSequence, cfg: LoopClosureConfig) -> Revisit:
 
     wrong_key = n - 1  # the far end of the first pass
     recognizer = InjectOnce(PlaceRecognizer(cfg.raplace.retrieval), n + 5, wrong_key)
-    detector = LoopDetector(cfg, recognizer=recognizer)
+    detector = LoopDetector(cfg, recognizer=recognizer, verifier=verifier)
     accepted = []
     for key, (k, shift) in enumerate(scans):
         accepted += detector.add(frame(k, shift), gt[k], key)
@@ -454,3 +460,102 @@ def test_detector_without_poses_keeps_scans_and_checks_keys(tiny: RadarSequence)
         detector.add(tiny[2], np.zeros(3))
     with pytest.raises(LoopClosureError, match="keys increase"):
         detector.add(tiny[2], key=0)
+
+
+def test_predicted_loop_carries_an_accepted_loop_along_both_drives() -> None:
+    """Each drive's odometry is off the truth by its own rigid transform (drift accumulated
+    before the stretch): the prediction from a true anchor loop is the true loop."""
+    truth_first = np.array([[0.0, 0.0, 0.1], [9.5, 1.0, 0.2], [19.0, 3.0, 0.3]])
+    truth_second = compose(truth_first, np.array([2.0, -1.5, 0.05]))  # the road driven again
+    first = compose(np.array([30.0, -4.0, 0.4]), truth_first)
+    second = compose(np.array([-12.0, 7.0, -1.1]), truth_second)
+    anchor = between(truth_second[0], truth_first[0])
+    for q, m in ((2, 2), (1, 2), (2, 1)):
+        predicted = predicted_loop(second[q], first[m], second[0], first[0], anchor)
+        np.testing.assert_allclose(predicted, between(truth_second[q], truth_first[m]), atol=1e-9)
+
+
+def test_refine_from_a_prediction_agrees_with_the_full_verification(tiny: RadarSequence) -> None:
+    verify = GeometricVerifier(LoopClosureConfig())
+    query, match = key_scan(tiny, 40), key_scan(tiny, 36)
+    full = verify(query, match)
+    truth = gt_relative(tiny, 40, 36)
+    checked = GeometricVerifier(LoopClosureConfig()).refine(query, match, truth, np.nan)
+    assert full.ok and checked.ok, checked.reason
+    error = between(full.measurement, checked.measurement)
+    assert np.hypot(*error[:2]) < 0.02 and abs(np.rad2deg(error[2])) < 0.1
+    off = compose(truth, np.array([3.0, 0.0, 0.0]))  # a prediction 3 m off
+    wrong = verify.refine(query, match, off, np.nan)
+    assert not wrong.ok and "prediction and phase correlation disagree" in wrong.reason
+
+
+class FailingRefiner:
+    """A `GeometricVerifier` whose checks from a prediction always fail."""
+
+    def __init__(self, cfg: LoopClosureConfig) -> None:
+        self.inner = GeometricVerifier(cfg)
+        self.refined = 0
+
+    def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
+        return self.inner(query, match)
+
+    def refine(
+        self, query: KeyScan, match: KeyScan, initial: np.ndarray, initial_quality: float
+    ) -> Verification:
+        self.refined += 1
+        return Verification(False, "always", initial, np.full((3, 3), np.nan), initial, np.nan)
+
+
+def test_closed_stretch_candidates_are_checked_from_their_prediction(tiny: RadarSequence) -> None:
+    """Throttled revisit: candidates on the closed stretch are checked from the prediction, and
+    the loops are those verified in full (pairs, statuses; measurements within 2 cm / 0.1 deg);
+    a check that fails falls back to the full verification."""
+    throttle = ThrottleConfig(closed_after=3, closed_spacing_m=10.0)
+    cfg = dataclasses.replace(EVERY_SCAN_QUERIES, throttle=throttle)
+    runs = {}
+    for label, checks in (("predicted", True), ("full", False)):
+        run_cfg = dataclasses.replace(
+            cfg, throttle=dataclasses.replace(throttle, predicted_checks=checks)
+        )
+        runs[label] = run_revisit(tiny, run_cfg)
+    predicted, full = runs["predicted"].detector, runs["full"].detector
+    assert predicted.predicted >= 1 and predicted.predicted_failed == 0 and full.predicted == 0
+    assert_accepted_loops_true(tiny, runs["predicted"])
+    pairs = [(d.query_key, d.match_key, d.status) for d in predicted.decisions]
+    assert pairs == [(d.query_key, d.match_key, d.status) for d in full.decisions]
+    for ours, theirs in zip(predicted.decisions, full.decisions, strict=True):
+        if ours.accepted:
+            error = between(ours.measurement, theirs.measurement)
+            assert np.hypot(*error[:2]) < 0.02 and abs(np.rad2deg(error[2])) < 0.1
+    failing = FailingRefiner(cfg)
+    fallback = run_revisit(tiny, cfg, verifier=failing).detector
+    assert failing.refined == fallback.predicted == fallback.predicted_failed >= 1
+    for ours, theirs in zip(fallback.decisions, full.decisions, strict=True):
+        assert (ours.query_key, ours.match_key, ours.status) == (
+            theirs.query_key,
+            theirs.match_key,
+            theirs.status,
+        )
+        np.testing.assert_array_equal(ours.measurement, theirs.measurement)
+    assert len(fallback.decisions) == len(full.decisions)
+
+
+def test_registration_seeded_with_a_prediction_matches_the_global_search(
+    tiny: RadarSequence,
+) -> None:
+    """`odometry.register` with a hint between the reference times (the loop checks from a
+    prediction, 0.6 m off here) finds the motion of the global search, within 1 cm / 0.15 deg
+    (reduced bins), and as close to the truth; one far off leads it astray."""
+    cfg = LoopClosureConfig().refinement
+    ref, cur = (prepare(tiny[k], cfg, twist(tiny, k)) for k in (40, 36))
+    free = register(ref, cur, cfg)
+    seeded = register(ref, cur, cfg, compose(free.motion, np.array([0.5, -0.4, 0.0])))
+    assert free.ok and seeded.ok
+    error = between(free.motion, seeded.motion)
+    assert np.hypot(*error[:2]) < 0.01 and abs(np.rad2deg(error[2])) < 0.15
+    for estimate in (free, seeded):
+        off = between(gt_relative(tiny, 40, 36), estimate.motion)
+        assert np.hypot(*off[:2]) < TRUE_TOLERANCE_M and abs(np.rad2deg(off[2])) < 0.5
+    # The hint is used: 10 m off, beyond `hint_radius_m`, the true peak is out of the search.
+    misled = register(ref, cur, cfg, compose(free.motion, np.array([10.0, 0.0, 0.0])))
+    assert np.hypot(*between(free.motion, misled.motion)[:2]) > cfg.translation.hint_radius_m

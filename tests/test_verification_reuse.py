@@ -166,3 +166,8 @@ class _Wrapped:
 
     def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
         return self.inner(query, match)
+
+    def refine(
+        self, query: KeyScan, match: KeyScan, initial: np.ndarray, initial_quality: float
+    ) -> Verification:  # the checks from a prediction (`radar_slam.loops.tracking`)
+        return self.inner.refine(query, match, initial, initial_quality)

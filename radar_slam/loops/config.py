@@ -132,6 +132,10 @@ class ThrottleConfig:
         max_gap_m: a stretch without an accepted loop over this much travel [m] is forgotten.
         max_stretches: stretches tracked at once (a place driven several times aligns with
             each earlier drive); the oldest is dropped beyond.
+        predicted_checks: a candidate on a closed stretch is checked by the phase-correlation
+            refinement alone, from the loop the stretch's latest one predicts
+            (`radar_slam.loops.tracking`; verified in full when that fails); False verifies it
+            in full.
     """
 
     closed_after: int = 3
@@ -140,6 +144,7 @@ class ThrottleConfig:
     stretch_drift_fraction: float = 0.05
     max_gap_m: float = 100.0
     max_stretches: int = 8
+    predicted_checks: bool = True
 
     def __post_init__(self) -> None:  # value ranges (issue 12)
         checks.at_least("closed_after", self.closed_after, 1)

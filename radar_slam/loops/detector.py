@@ -6,7 +6,9 @@ below `max_descriptor_distance`, verifies each proposal, best first, until one p
 (`radar_slam.loops.verification`), and, with poses, accepts a verified loop once another loop
 nearby agrees with it (`radar_slam.loops.consistency`); with poses too, a query on a stretch
 already closed by consecutive accepted loops is verified only once per
-`throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`). Each scan is handled once
+`throttle.closed_spacing_m` of travel (`radar_slam.loops.throttle`), and a candidate on such a
+stretch is checked from the loop its latest one predicts (`radar_slam.loops.tracking`; in full
+when that check fails). Each scan is handled once
 the next one is in (or at `finish`): its de-skew twist is the odometry's velocity interpolated to
 the middle of its sweep from the steps before and after it (`radar_slam.loops.sweep_twist`).
 A scan joins the place database once the vehicle has driven `recent_path_m` past it, and a
@@ -39,10 +41,12 @@ from radar_slam.loops.records import (
     LoopConstraint,
     LoopDecision,
     LoopStatus,
+    Verification,
     VerifiedLoop,
 )
 from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_twist, sweep_twist
 from radar_slam.loops.throttle import StretchThrottle
+from radar_slam.loops.tracking import Refiner, predicted_loop
 from radar_slam.loops.verification import GeometricVerifier, Verifier
 from raplace.descriptor import DescriptorExtractor
 from raplace.retrieval import Candidate, PlaceRecognizer, Recognizer
@@ -180,6 +184,8 @@ class LoopDetector:
         self._track = _Track()
         self.proposed = 0
         self.out_of_reach = 0  # candidates the odometry placed out of the verifier's reach
+        self.predicted = 0  # candidates on a closed stretch checked from their prediction ...
+        self.predicted_failed = 0  # ... of which verified in full again
 
     # -- results ------------------------------------------------------------------------------
     @property
@@ -397,7 +403,7 @@ class LoopDetector:
         for candidate in candidates:  # at most `candidates` (k), best first
             match = self._entries[candidate.key]
             match_scan = KeyScan(match.key, match.timestamp_ns, self._scan_of(match), match.twist)
-            result = self.verifier(query, match_scan)
+            result = self._verify(entry, match, query, match_scan)
             decision = len(self._decisions)
             self._append(LoopDecision.of(query, match_scan, match.key, candidate.distance, result))
             log.debug(
@@ -437,6 +443,43 @@ class LoopDetector:
             if passed >= cfg.loops_per_query:
                 break
         return changes
+
+    def _verify(self, entry: _Entry, match: _Entry, query: KeyScan, scan: KeyScan) -> Verification:
+        """Verify a candidate: from its prediction when it lies on a closed stretch (in full
+        when that fails), else in full (`radar_slam.loops.tracking`)."""
+        initial = self._prediction(entry, match)
+        if initial is not None and isinstance(self.verifier, Refiner):
+            self.predicted += 1
+            result = self.verifier.refine(query, scan, initial, float("nan"))
+            if result.ok:
+                return result
+            self.predicted_failed += 1
+        return self.verifier(query, scan)
+
+    def _prediction(self, entry: _Entry, match: _Entry) -> FloatArray | None:
+        """T_query_match predicted by the latest loop of the closed stretch the match lies on,
+        or None (no such stretch, the odometry not trusted in between, or out of reach)."""
+        cfg = self.config
+        if not cfg.throttle.predicted_checks or entry.pose is None or match.pose is None:
+            return None
+        decision = self.throttle.anchor(entry.path_m, match.path_m)
+        if decision is None or not self._decisions[decision].accepted:
+            return None
+        anchor = self._decisions[decision]
+        anchor_query = self._entries.get(anchor.query_key)
+        anchor_match = self._entries.get(anchor.match_key)
+        if anchor_query is None or anchor_match is None:
+            return None
+        if anchor_query.pose is None or anchor_match.pose is None:
+            return None
+        if (anchor_query.segment, anchor_match.segment) != (entry.segment, match.segment):
+            return None
+        initial = predicted_loop(
+            entry.pose, match.pose, anchor_query.pose, anchor_match.pose, anchor.measurement
+        )
+        if np.hypot(initial[0], initial[1]) > cfg.verification.max_translation_m:
+            return None
+        return initial
 
     def _apply(self, changes: dict[int, LoopStatus]) -> list[LoopConstraint]:
         """Record status changes; return the newly accepted loops as constraints."""

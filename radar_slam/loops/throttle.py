@@ -11,6 +11,9 @@ returns to full rate: a candidate off the stretch is verified as usual, and a fa
 verification on the stretch, a rejected loop, or `max_gap_m` of travel without an accepted loop
 on it ends the stretch.
 
+`anchor` names the latest loop of the closed stretch a candidate lies on, from which the loop
+detector predicts the candidate's loop (`radar_slam.loops.tracking`).
+
 Skipping only ever removes verifications, so it cannot add a false loop; the consistency gate
 (`radar_slam.loops.consistency`) still sees a loop every `closed_spacing_m`, well inside its
 support window.
@@ -33,6 +36,7 @@ class _Loop:
     query_path_m: float
     match_path_m: float
     direction: int  # +1: driven the same way as the match, -1: the opposite way
+    decision: int = -1
 
 
 @dataclass(frozen=True)
@@ -44,12 +48,14 @@ class Stretch:
         match_path_m: match path length of its latest loop [m].
         direction: +1 when the query drives the way the match did, -1 the opposite way.
         loops: accepted loops along it.
+        decision: the loop detector's decision index of its latest loop (-1: unknown).
     """
 
     query_path_m: float
     match_path_m: float
     direction: int
     loops: int
+    decision: int = -1
 
     def offset_m(self, query_path_m: float, match_path_m: float, cfg: ThrottleConfig) -> float:
         """How far [m] a match at `match_path_m` lies from where the stretch predicts the match
@@ -93,6 +99,17 @@ class StretchThrottle:
             for s in self.stretches
         )
 
+    def anchor(self, query_path_m: float, match_path_m: float) -> int | None:
+        """The decision index of the latest loop of the closed stretch a match at
+        `match_path_m` lies on (the nearest to its prediction), or None when it is on none."""
+        on = [
+            (s.offset_m(query_path_m, match_path_m, self.cfg), s.decision)
+            for s in self.stretches
+            if self.closed(s) and s.decision >= 0
+        ]
+        on = [item for item in on if item[0] <= 0.0]
+        return min(on)[1] if on else None
+
     def due(self, query_path_m: float, match_paths_m: list[float]) -> bool:
         """Whether a query at `query_path_m` with candidates matching at `match_paths_m` is
         verified (False: skipped, counted in `skipped`)."""
@@ -113,7 +130,9 @@ class StretchThrottle:
         if self.on_closed_stretch(query_path_m, match_path_m):
             self._last_verified_m = query_path_m
         if ok:
-            self._passed[decision] = _Loop(query_path_m, match_path_m, direction_of(yaw_rad))
+            self._passed[decision] = _Loop(
+                query_path_m, match_path_m, direction_of(yaw_rad), decision
+            )
         else:  # the stretch may have ended there: back to full rate on it
             self._end(query_path_m, match_path_m)
 
@@ -139,10 +158,10 @@ class StretchThrottle:
                 continue
             if loop.query_path_m > s.query_path_m:  # not an older loop accepted late
                 self.stretches[n] = Stretch(
-                    loop.query_path_m, loop.match_path_m, s.direction, s.loops + 1
+                    loop.query_path_m, loop.match_path_m, s.direction, s.loops + 1, loop.decision
                 )
             return
-        new = Stretch(loop.query_path_m, loop.match_path_m, loop.direction, 1)
+        new = Stretch(loop.query_path_m, loop.match_path_m, loop.direction, 1, loop.decision)
         self.stretches = [*self.stretches, new][-self.cfg.max_stretches :]
 
     def _end(self, query_path_m: float, match_path_m: float) -> None:

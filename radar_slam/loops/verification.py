@@ -142,6 +142,7 @@ class GeometricVerifier:
         self._query_key: int | None = None
         self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
+        self._prepared_key: int | None = None
         self._offered: dict[int, tuple[PolarScan, PreprocessConfig]] = {}
         self.reused = 0
         """Queries whose offered conditioned scan was used (a count, for benchmarks)."""
@@ -169,10 +170,12 @@ class GeometricVerifier:
         if self._query_key != query.key or self._query_spectrum is None:
             self._query_key = query.key
             self._query_spectrum = self._spectrum(query.scan)
-            self._query_prepared = None
         return self._query_spectrum
 
     def _prepared_query(self, query: KeyScan) -> PreparedScan:
+        if self._prepared_key != query.key:  # `refine` may come without `_query`
+            self._prepared_key = query.key
+            self._query_prepared = None
         if self._query_prepared is None:
             self._query_prepared = self._from_offer(query)
         if self._query_prepared is None:
@@ -211,7 +214,6 @@ class GeometricVerifier:
             self._query(query), self._map_spectrum(match)
         )
         sinogram = motion_compensated(rel.as_array(), query, match)
-        nan3 = np.full(3, np.nan)
         nan33 = np.full((3, 3), np.nan)
 
         def failed(
@@ -237,12 +239,34 @@ class GeometricVerifier:
                 f"scans {distance_m:.1f} m apart (more than {vcfg.max_translation_m:.1f} m)"
             )
 
-        # Phase correlation of the query and the match turned by the sinogram rotation.
-        turn = float(sinogram[2])
+        return self.refine(query, match, sinogram, float(rel.quality))
+
+    def refine(
+        self, query: KeyScan, match: KeyScan, initial: FloatArray, initial_quality: float
+    ) -> Verification:
+        """The phase-correlation half of the verification (b and c of the module docstring)
+        from an initial T_query_match (3,): the sinogram estimate (`__call__`), or a prediction
+        (`initial_quality` NaN; `radar_slam.loops.tracking`), which also seeds the registration
+        (its coarse peak searched within `refinement.translation.hint_radius_m` of the
+        prediction). Never raises for a bad match."""
+        vcfg = self.cfg.verification
+        nan3 = np.full(3, np.nan)
+        nan33 = np.full((3, 3), np.nan)
+
+        def failed(reason: str, measurement: FloatArray, quality: float) -> Verification:
+            return Verification(
+                False, reason, measurement, nan33, initial, initial_quality, quality
+            )
+
+        # Phase correlation of the query and the match turned by the initial rotation.
+        turn = float(initial[2])
         aligned = prepare(
             turned(match.scan, turn), self.cfg.refinement, turned_twist(match.twist, turn)
         )
-        estimate = register(self._prepared_query(query), aligned, self.cfg.refinement)
+        # A prediction also seeds the registration (its translation; the match is turned by its
+        # rotation): one rotation and half-turn hypothesis instead of a global search.
+        hint = None if np.isfinite(initial_quality) else np.array([initial[0], initial[1], 0.0])
+        estimate = register(self._prepared_query(query), aligned, self.cfg.refinement, hint)
         refined = compose(estimate.motion, np.array([0.0, 0.0, turn]))
         if not estimate.ok:
             return failed(f"phase correlation failed: {estimate.reason}", nan3, estimate.quality)
@@ -253,12 +277,13 @@ class GeometricVerifier:
                 refined,
                 estimate.quality,
             )
-        disagreement = between(refined, sinogram)
+        disagreement = between(refined, initial)
         off_m = float(np.hypot(disagreement[0], disagreement[1]))
         off_deg = float(np.rad2deg(abs(wrap_angle(disagreement[2]))))
         if off_m > vcfg.max_disagreement_m or off_deg > vcfg.max_disagreement_deg:
+            source = "sinogram" if np.isfinite(initial_quality) else "prediction"
             return failed(
-                f"sinogram and phase correlation disagree by {off_m:.2f} m / {off_deg:.2f} deg "
+                f"{source} and phase correlation disagree by {off_m:.2f} m / {off_deg:.2f} deg "
                 f"(max {vcfg.max_disagreement_m:.2f} m / {vcfg.max_disagreement_deg:.2f} deg)",
                 refined,
                 estimate.quality,
@@ -267,5 +292,5 @@ class GeometricVerifier:
             estimate.covariance, disagreement, float(refined[2]), self.cfg.covariance
         )
         return Verification(
-            True, "", refined, covariance, sinogram, float(rel.quality), float(estimate.quality)
+            True, "", refined, covariance, initial, initial_quality, float(estimate.quality)
         )

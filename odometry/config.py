@@ -89,6 +89,11 @@ class RotationConfig:
         refine_n_angles: angular samples of that polar grid over a full turn.
         refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
         refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
+        refine_passes: refinements in a row; each after the first re-estimates the coarse
+            translation at the refined yaw (near the previous one) first. The first coarse
+            translation is made at the Fourier-Mellin yaw, which locks toward zero for
+            rotations below about a degree; its error leaks into a single refinement as a
+            rotation error proportional to the rotation (see `scripts/diagnose_rotation_bias.py`).
     """
 
     n_angles: int = 720
@@ -103,6 +108,7 @@ class RotationConfig:
     refine_max_range_m: float = 80.0
     refine_range_step_m: float = 0.5
     refine_smoothing_bins: float = 2.0
+    refine_passes: int = 2
 
     def __post_init__(self) -> None:
         checks.at_least("n_angles", self.n_angles, 2)
@@ -122,6 +128,7 @@ class RotationConfig:
         )
         checks.positive("refine_range_step_m", self.refine_range_step_m)
         checks.non_negative("refine_smoothing_bins", self.refine_smoothing_bins)
+        checks.at_least("refine_passes", self.refine_passes, 1)
 
 
 @dataclass(frozen=True)

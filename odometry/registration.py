@@ -266,9 +266,13 @@ def register_images(
     t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
     coarse_motion = np.array([t_coarse[0], t_coarse[1], yaw])
     if cfg.rotation.refine:
-        residual = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
-        yaw = float(wrap_angle(yaw + residual.angle_rad))
-        rotation = residual
+        for refinement in range(cfg.rotation.refine_passes):
+            if refinement:  # the translation again at the refined yaw, near the last one
+                coarse_peak, yaw = _coarse_translation(ref, cur, yaw, cfg, t_coarse)
+                t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
+            residual = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
+            yaw = float(wrap_angle(yaw + residual.angle_rad))
+            rotation = residual
 
     peak, cell = coarse_peak, coarse_level.cell_m
     if cfg.translation.use_fine:

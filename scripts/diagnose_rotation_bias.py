@@ -12,7 +12,7 @@ Sub-commands (each prints a small table; the README's issue-10 notes quote them)
 - `rotation`: known rotations at sub-bin angles (0.1-1.1 deg; azimuth step 0.9 deg, refinement
   bin 0.5 deg), with and without translation, on exactly rendered point-target scans
   (`tests/point_scenes.py`, no radar physics): the Fourier-Mellin (coarse) yaw and the refined
-  yaw for 1 and 2 refinement passes.
+  yaw for 1 and 2 refinement passes (`--full`: at MulRan's 3360 range bins).
 - `deskew`: a point-target scan rendered with motion distortion, de-skewed with the exact twist,
   registered against the undistorted scan at the same pose (the de-skew's own residual).
 - `sim`: 10 m straight drives at 10 m/s through `loop`'s town rendered by the simulator, paired
@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from point_scenes import (  # noqa: E402  (the test helper folder is put on the path above)
+    BIN_M,
     N_AZIMUTHS,
     SWEEP_NS,
     moving_poses,
@@ -50,6 +51,7 @@ from point_scenes import (  # noqa: E402  (the test helper folder is put on the 
 from odometry.config import DeskewConfig, OdometryConfig, RotationConfig  # noqa: E402
 from odometry.deskew import motion_from_twist, sampling_maps  # noqa: E402
 from odometry.registration import estimate_motion  # noqa: E402
+from odometry.scan import Scan  # noqa: E402
 from radar_slam.datasets.mulran import column_azimuths_rad  # noqa: E402
 from raplace import se2  # noqa: E402
 
@@ -79,7 +81,7 @@ def timestamps(shared: Path) -> None:
         t_ns = np.loadtxt(path, delimiter=",", usecols=0, dtype=np.int64)
         series.append((f"MulRan {path.name}", (t_ns - t_ns[0]).astype(np.float64) * 1e-9))
     for path in sorted((shared / "oxford").glob("*/radar/*.png"))[:3]:
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        image = np.asarray(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), dtype=np.uint8)
         t_us = np.ascontiguousarray(image[:, :8]).view("<i8")[:, 0]
         series.append((f"Oxford {path.name}", (t_us - t_us[0]).astype(np.float64) * 1e-6))
     print("scan | period [us] | residual of the linear fit [ms]: min, max, rms | largest step [ms]")
@@ -176,6 +178,12 @@ def geometry(n_points: int) -> None:
         )
 
 
+def _scan(targets: FloatArray, pose: list[float], end_ns: int, size: dict[str, float]) -> Scan:
+    """A still scan of `targets` from `pose`, at the default or the given bin size."""
+    polar = render_polar(targets, static_poses(pose), **size)  # type: ignore[arg-type]
+    return scan_frame(polar, end_ns, False, size.get("bin_m", BIN_M))
+
+
 def _cfg(**rotation: object) -> OdometryConfig:
     return OdometryConfig(
         deskew=DeskewConfig(enabled=False),
@@ -183,24 +191,26 @@ def _cfg(**rotation: object) -> OdometryConfig:
     )
 
 
-def rotation(n_scenes: int) -> None:
-    """Yaw errors [mdeg] of known rotations: coarse (Fourier-Mellin) and refined."""
+MULRAN_BIN_M = 0.05952
+MULRAN_N_BINS = 3360
+
+
+def rotation(n_scenes: int, full: bool) -> None:
+    """Yaw errors [mdeg] of known rotations: coarse (Fourier-Mellin) and refined; `full`: at
+    MulRan's 3360 bins of 0.0595 m instead of 500 of 0.2 m."""
+    size = {"n_bins": MULRAN_N_BINS, "bin_m": MULRAN_BIN_M} if full else {}
     angles_mdeg = (0.0, 100.0, 225.0, 450.0, 675.0, 900.0, 1125.0, 1800.0)
     configs = {"1 pass": _cfg(refine_passes=1), "2 passes": _cfg(refine_passes=2)}
     print("translation [m] | rotation [mdeg] | coarse yaw [mdeg] | refined error [mdeg], mean"
           " +- s.e.: " + ", ".join(configs))  # fmt: skip
     scenes = [point_scene(np.random.default_rng(seed)) for seed in range(n_scenes)]
-    refs = [
-        scan_frame(render_polar(t, static_poses([0.0, 0.0, 0.0])), 10**9, False) for t in scenes
-    ]
+    refs = [_scan(t, [0.0, 0.0, 0.0], 10**9, size) for t in scenes]
     for translation in ((0.0, 0.0), (2.5, 0.0), (10.0, 0.0)):
         for angle in angles_mdeg:
             pose = [translation[0], translation[1], np.radians(angle / 1000.0)]
-            curs = [
-                scan_frame(render_polar(t, static_poses(pose)), 10**9 + SWEEP_NS, False)
-                for t in scenes
-            ]
-            coarse, refined = [], {name: [] for name in configs}
+            curs = [_scan(t, pose, 10**9 + SWEEP_NS, size) for t in scenes]
+            coarse: list[float] = []
+            refined: dict[str, list[float]] = {name: [] for name in configs}
             for ref, cur in zip(refs, curs, strict=True):
                 for name, cfg in configs.items():
                     estimate = estimate_motion(ref, cur, cfg)
@@ -306,6 +316,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("what", choices=["timestamps", "geometry", "rotation", "deskew", "sim"])
     parser.add_argument("--scenes", type=int, default=8, help="scenes / drives per case")
+    parser.add_argument("--full", action="store_true", help="rotation: at MulRan's 3360 bins")
     parser.add_argument(
         "--shared-data",
         type=Path,
@@ -317,7 +328,7 @@ def main() -> None:
     elif args.what == "geometry":
         geometry(4000)
     elif args.what == "rotation":
-        rotation(args.scenes)
+        rotation(args.scenes, args.full)
     elif args.what == "deskew":
         deskew(args.scenes)
     else:

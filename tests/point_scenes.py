@@ -64,11 +64,14 @@ def moving_poses(
 
 
 def render_polar(
-    targets: NDArray[np.float64], row_poses: NDArray[np.float64], n_bins: int = N_BINS
+    targets: NDArray[np.float64],
+    row_poses: NDArray[np.float64],
+    n_bins: int = N_BINS,
+    bin_m: float = BIN_M,
 ) -> NDArray[np.uint8]:
     """(N_AZIMUTHS, n_bins) uint8 scan of `targets` ((N, 3), world) with row i seen from
     `row_poses[i]` (world) along the MulRan azimuth of row i (clockwise sweep); bin k is centred
-    at (k + 0.5) * BIN_M."""
+    at (k + 0.5) * bin_m [m] (the range spread is RANGE_SIGMA_BINS * BIN_M at any bin size)."""
     azimuths = column_azimuths_rad(N_AZIMUTHS)
     c, s = np.cos(row_poses[:, 2:3]), np.sin(row_poses[:, 2:3])
     dx = targets[None, :, 0] - row_poses[:, 0:1]
@@ -77,25 +80,29 @@ def render_polar(
     off_beam = se2.wrap_angle(np.arctan2(local_y, local_x) - azimuths[:, None])
     weight = np.exp(-0.5 * (off_beam / np.radians(BEAM_SIGMA_DEG)) ** 2) * targets[None, :, 2]
     rows, cols = np.nonzero(weight > MIN_WEIGHT)
-    centre = np.hypot(local_x, local_y)[rows, cols] / BIN_M - 0.5
+    centre = np.hypot(local_x, local_y)[rows, cols] / bin_m - 0.5
+    sigma = RANGE_SIGMA_BINS * BIN_M / bin_m
+    reach = round(3.5 * sigma)
     image = np.zeros((N_AZIMUTHS, n_bins))
-    for offset in range(-4, 5):
+    for offset in range(-reach, reach + 1):
         k = np.rint(centre).astype(np.int64) + offset
         ok = (k >= 0) & (k < n_bins)
-        spread = np.exp(-0.5 * ((k[ok] - centre[ok]) / RANGE_SIGMA_BINS) ** 2)
+        spread = np.exp(-0.5 * ((k[ok] - centre[ok]) / sigma) ** 2)
         np.add.at(image, (rows[ok], k[ok]), weight[rows[ok], cols[ok]] * spread)
     return np.clip(image * INTENSITY_SCALE, 0, 255).astype(np.uint8)
 
 
-def scan_frame(polar: NDArray[np.uint8], end_ns: int, with_times: bool) -> RadarFrame:
-    """A `RadarFrame` of a rendered scan ending at `end_ns` (its reference time), with uniform
-    MulRan azimuth times when `with_times`."""
+def scan_frame(
+    polar: NDArray[np.uint8], end_ns: int, with_times: bool, bin_m: float = BIN_M
+) -> RadarFrame:
+    """A `RadarFrame` of a rendered scan (bins of `bin_m` [m]) ending at `end_ns` (its reference
+    time), with uniform MulRan azimuth times when `with_times`."""
     times = uniform_azimuth_times_ns(end_ns, SWEEP_NS, N_AZIMUTHS) if with_times else None
     return RadarFrame(
         timestamp_ns=end_ns,
         polar=polar,
         azimuths_rad=column_azimuths_rad(N_AZIMUTHS),
-        range_resolution_m=BIN_M,
+        range_resolution_m=bin_m,
         sensor="point-targets",
         azimuth_times_ns=times,
     )

@@ -89,6 +89,15 @@ class RotationConfig:
         refine_n_angles: angular samples of that polar grid over a full turn.
         refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
         refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
+        refine_passes: at most this many refinements in a row; each after the first
+            re-estimates the coarse translation at the refined yaw (near the previous one)
+            first. The first coarse translation is made at the Fourier-Mellin yaw, which locks
+            toward zero for rotations below about a degree; its error leaks into a single
+            refinement as a rotation error proportional to the rotation (see
+            `scripts/diagnose_rotation_bias.py`). 2 removes that error, but the drives get no
+            better with it (the README's issue-10b notes), so 1 stays the default.
+        refine_repeat_min_deg: the refinement is repeated only while its last correction was
+            larger than this [deg] (the translation was made at a yaw off by that much).
     """
 
     n_angles: int = 720
@@ -103,6 +112,8 @@ class RotationConfig:
     refine_max_range_m: float = 80.0
     refine_range_step_m: float = 0.5
     refine_smoothing_bins: float = 2.0
+    refine_passes: int = 1
+    refine_repeat_min_deg: float = 0.05
 
     def __post_init__(self) -> None:
         checks.at_least("n_angles", self.n_angles, 2)
@@ -122,6 +133,8 @@ class RotationConfig:
         )
         checks.positive("refine_range_step_m", self.refine_range_step_m)
         checks.non_negative("refine_smoothing_bins", self.refine_smoothing_bins)
+        checks.at_least("refine_passes", self.refine_passes, 1)
+        checks.non_negative("refine_repeat_min_deg", self.refine_repeat_min_deg)
 
 
 @dataclass(frozen=True)

@@ -272,9 +272,15 @@ def register_images(
     t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
     coarse_motion = np.array([t_coarse[0], t_coarse[1], yaw])
     if cfg.rotation.refine:
-        residual = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
-        yaw = float(wrap_angle(yaw + residual.angle_rad))
-        rotation = residual
+        for refinement in range(cfg.rotation.refine_passes):
+            if refinement:
+                if abs(rotation.angle_rad) <= np.deg2rad(cfg.rotation.refine_repeat_min_deg):
+                    break  # converged: the translation was made at (about) this yaw
+                # The translation again at the refined yaw (near the last one), then the rotation.
+                coarse_peak, yaw = _coarse_translation(ref, cur, yaw, cfg, t_coarse)
+                t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
+            rotation = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
+            yaw = float(wrap_angle(yaw + rotation.angle_rad))
 
     peak, cell = coarse_peak, coarse_level.cell_m
     if cfg.translation.use_fine:

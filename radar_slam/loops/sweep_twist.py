@@ -76,3 +76,12 @@ def sweep_twist(
         assert known is not None
         return np.asarray(known.twist, dtype=np.float64).copy()
     return interpolated_twist(before, after, mean_time_ns)
+
+
+def twist_change(before: Velocity | None, after: Velocity | None) -> FloatArray | None:
+    """(3,) change of the twist across a scan, the step after's minus the step before's
+    (vx, vy [m/s], yaw rate [rad/s]); None unless both are known. The sweep twist's error grows
+    with it (a yaw-rate step inside the interval; `LoopCovarianceConfig.deskew_error_fraction`)."""
+    if before is None or after is None:
+        return None
+    return np.asarray(after.twist, dtype=np.float64) - np.asarray(before.twist, dtype=np.float64)

@@ -194,12 +194,15 @@ class QualityConfig:
             fraction of the turn, as a standard deviation [deg/deg].
         deskew_error_fraction: in `Odometry`, a scan de-skewed with a velocity that lags the
             vehicle's (braking, a yaw-rate step) is bent by about the velocity's last change
-            times half a sweep; this multiple of that bend is added as a standard deviation
-            (translation [m] and rotation [rad]; above 1 because the measured change itself lags
-            the true one).
-        Both are off (0) by default: with the loops' covariances not calibrated alike, looser
-        odometry factors in turns let the loops bend the trajectory (see the README's de-skew
-        notes); 0.1 and 1.25 make the odometry's own covariances consistent in hard driving.
+            times half a sweep; this multiple of the translation bend is added as a standard
+            deviation [m] (above 1 because the measured change itself lags the true one).
+        deskew_yaw_error_fraction: the same for the rotation bend [rad].
+        The three terms are off (0) by default. 0.1 and 1.25 / 1.25 make the odometry's own
+        covariances consistent in hard driving, but looser rotations in turns let the pose graph
+        put the straight steps' rotation bias into the turns (SLAM ATE worse); the translation
+        term alone, with the loops' covariances calibrated alike
+        (`radar_slam.loops.config.LoopCovarianceConfig`), trades SLAM accuracy between
+        scenarios (README, covariance notes; `scripts/bench_nees.py`).
     """
 
     min_peak_quality: float = 6.0
@@ -216,6 +219,7 @@ class QualityConfig:
     velocity_lag_fraction: float = 0.25
     sigma_yaw_deg_per_deg: float = 0.0
     deskew_error_fraction: float = 0.0
+    deskew_yaw_error_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -239,6 +243,7 @@ class QualityConfig:
             "velocity_lag_fraction",
             "sigma_yaw_deg_per_deg",
             "deskew_error_fraction",
+            "deskew_yaw_error_fraction",
         ):
             checks.non_negative(name, getattr(self, name))
 

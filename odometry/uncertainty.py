@@ -44,11 +44,13 @@ def unseen_covariance(
     """(3, 3) covariance [m^2, rad^2] of registration errors the correlation peak does not show:
     a rotation error growing with the turn of `motion` (3,) (dx, dy [m], dyaw [rad]), and the
     bend of a scan de-skewed with a velocity that lags the vehicle's by about `velocity_change`
-    (3,) (its last change [m/s, m/s, rad/s]) over half a sweep. The translation term is
-    isotropic, so the axes it is expressed in do not matter."""
+    (3,) (its last change [m/s, m/s, rad/s]) over half a sweep, its translation scaled by
+    `quality.deskew_error_fraction` and its rotation by `quality.deskew_yaw_error_fraction`.
+    The translation term is isotropic, so the axes it is expressed in do not matter."""
     timing = scan.polar.timing
     half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
-    bend = quality.deskew_error_fraction * half_sweep_s * np.abs(np.asarray(velocity_change))
-    sigma_xy_sq = float(bend[0] ** 2 + bend[1] ** 2)
+    bend = half_sweep_s * np.abs(np.asarray(velocity_change, dtype=float))
+    sigma_xy_sq = quality.deskew_error_fraction**2 * float(bend[0] ** 2 + bend[1] ** 2)
     sigma_yaw = quality.sigma_yaw_deg_per_deg * abs(wrap_angle(float(motion[2])))
-    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_yaw**2 + float(bend[2] ** 2)])
+    sigma_bend_yaw = quality.deskew_yaw_error_fraction * float(bend[2])
+    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_yaw**2 + sigma_bend_yaw**2])

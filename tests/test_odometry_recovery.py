@@ -48,7 +48,9 @@ MAX_DRIVE_ERROR_FRACTION = 0.02
 MAX_DRIFT_PCT_1HZ = 2.5
 """KITTI drift bar at --stride 4 (issue 10)."""
 CALIBRATED = OdometryConfig(
-    quality=QualityConfig(sigma_yaw_deg_per_deg=0.1, deskew_error_fraction=1.25),
+    quality=QualityConfig(
+        sigma_yaw_deg_per_deg=0.1, deskew_error_fraction=1.25, deskew_yaw_error_fraction=1.25
+    ),
     deskew=DeskewConfig(revise_reference_pose=False),
 )
 """The covariance terms that make the odometry's own covariances consistent (off by default),

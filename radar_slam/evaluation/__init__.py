@@ -3,6 +3,7 @@
     metrics.py      ATE / RPE / KITTI drift (evo), association, alignment
     truth.py        whether a loop closure is true (`is_true_loop`)
     false_loops.py  false-loop injection for robustness experiments (tests, benchmarks)
+    nees.py         NEES of pose-graph between-factors against the ground truth
 
 The library core (raplace, odometry, loops, graph, datasets, sim) never imports this package.
 """

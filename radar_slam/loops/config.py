@@ -55,19 +55,39 @@ class LoopCovarianceConfig:
     C_peak the phase-correlation covariance (peak width squared over peak-to-noise squared,
     `odometry.registration`), (d_xy, d_yaw) the sinogram / phase-correlation disagreement.
 
+    cov += deskew_error_fraction^2 * (b_query^2 + b_match^2) per axis, b a scan's de-skew bend.
+    The defaults leave the loops' covariances conservative at 4 Hz and too tight for scans swept
+    while turning at 1 Hz; the README (covariance notes) gives settings calibrated against the
+    ground truth alike with the odometry factors (mean NEES, `scripts/bench_nees.py`) and what
+    they cost and gain in SLAM accuracy. The de-skew terms are off (0) by default.
+
     Attributes:
         sigma_scale: multiplies the peak-derived standard deviations.
         disagreement_weight: weight of the disagreement term.
         min_sigma_xy_m: floor of the translation standard deviation [m].
         min_sigma_yaw_deg: floor of the rotation standard deviation [deg].
+        deskew_error_fraction: each scan is de-skewed with the odometry's twist interpolated to
+            mid-sweep, off by up to its change across the scan (a yaw-rate step inside a 1 s
+            interval at 1 Hz); this fraction of the bend that change makes over half a sweep is
+            added as a standard deviation for each scan (translation [m], rotation [rad];
+            `verification.deskew_variance`).
+        swept_turn_fraction: a scan swept while turning is de-skewed with a yaw rate whose
+            error grows with it (the odometry's rotation bias per deg/s of de-skew error, see the
+            README); this fraction of the rotation over half a sweep at the scan's yaw rate is
+            added as a rotation standard deviation for each scan [rad]
+            (`verification.swept_turn_variance`).
     """
 
     sigma_scale: float = 1.0
     disagreement_weight: float = 0.2
     min_sigma_xy_m: float = 0.05
     min_sigma_yaw_deg: float = 0.1
+    deskew_error_fraction: float = 0.0
+    swept_turn_fraction: float = 0.0
 
     def __post_init__(self) -> None:  # value ranges (issue 12)
+        checks.non_negative("deskew_error_fraction", self.deskew_error_fraction)
+        checks.non_negative("swept_turn_fraction", self.swept_turn_fraction)
         checks.positive("sigma_scale", self.sigma_scale)
         checks.non_negative("disagreement_weight", self.disagreement_weight)
         checks.positive("min_sigma_xy_m", self.min_sigma_xy_m)

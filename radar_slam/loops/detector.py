@@ -44,7 +44,12 @@ from radar_slam.loops.records import (
     Verification,
     VerifiedLoop,
 )
-from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_twist, sweep_twist
+from radar_slam.loops.sweep_twist import (
+    mean_acquisition_time_ns,
+    step_twist,
+    sweep_twist,
+    twist_change,
+)
 from radar_slam.loops.throttle import StretchThrottle
 from radar_slam.loops.tracking import Refiner, predicted_loop
 from radar_slam.loops.verification import GeometricVerifier, Verifier
@@ -125,6 +130,7 @@ class _Entry:
     twist: FloatArray | None
     scan: Scan | None
     segment: int = 0
+    twist_change: FloatArray | None = None  # i10c: for the loop covariance's de-skew term
 
 
 class LoopDetector:
@@ -313,9 +319,10 @@ class LoopDetector:
         if held is None:
             return []
         track = self._track
-        twist = None
+        twist = change = None
         if held.pose is not None:
             twist = sweep_twist(held.before, after, mean_acquisition_time_ns(held.scan))
+            change = twist_change(held.before, after)
         changes: dict[int, LoopStatus] = {}
         if held.pose is not None:
             changes.update(self.gate.expire(held.path_m))
@@ -323,7 +330,7 @@ class LoopDetector:
             held.pose is None
         ):
             track.path_at_last_entry_m = held.path_m
-            changes.update(self._query_and_insert(held, twist))
+            changes.update(self._query_and_insert(held, twist, change))
         self.throttle.resolved(changes)
         return self._apply(changes)
 
@@ -360,7 +367,9 @@ class LoopDetector:
             self._scans.put(entry.key, scan)
         return scan
 
-    def _query_and_insert(self, held: _Held, twist: FloatArray | None) -> dict[int, LoopStatus]:
+    def _query_and_insert(
+        self, held: _Held, twist: FloatArray | None, change: FloatArray | None = None
+    ) -> dict[int, LoopStatus]:
         cfg = self.config
         scan, pose, key = held.scan, held.pose, held.key
         time_s = int(scan.timestamp_ns) / NS_PER_S
@@ -388,6 +397,7 @@ class LoopDetector:
             twist=twist,
             scan=None if self.scan_loader is not None else scan,
             segment=held.segment,
+            twist_change=change,
         )
         self._entries[key] = entry
         if entry.scan is None:
@@ -398,11 +408,13 @@ class LoopDetector:
             entry.path_m, [self._entries[c.key].path_m for c in candidates]
         ):
             return changes
-        query = KeyScan(key, entry.timestamp_ns, scan, twist)
+        query = KeyScan(key, entry.timestamp_ns, scan, twist, change)
         passed = 0
         for candidate in candidates:  # at most `candidates` (k), best first
             match = self._entries[candidate.key]
-            match_scan = KeyScan(match.key, match.timestamp_ns, self._scan_of(match), match.twist)
+            match_scan = KeyScan(
+                match.key, match.timestamp_ns, self._scan_of(match), match.twist, match.twist_change
+            )
             result = self._verify(entry, match, query, match_scan)
             decision = len(self._decisions)
             self._append(LoopDecision.of(query, match_scan, match.key, candidate.distance, result))

@@ -133,12 +133,16 @@ class KeyScan:
         timestamp_ns: scan time [ns].
         scan: the scan itself.
         twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) for de-skewing, or None.
+        twist_change: (3,) change of the odometry's twist across the scan (the step after's
+            minus the step before's, same units), or None; the de-skew twist's error grows
+            with it (`LoopCovarianceConfig.deskew_error_fraction`).
     """
 
     key: int
     timestamp_ns: int
     scan: Scan
     twist: FloatArray | None = None
+    twist_change: FloatArray | None = None
 
 
 @dataclass(frozen=True)

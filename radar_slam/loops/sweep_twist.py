@@ -109,3 +109,12 @@ def scan_sweep_twist(
     steps into and out of the scan; None when neither is known)."""
     after = velocities[n + 1] if n + 1 < len(velocities) else None
     return sweep_twist(velocities[n], after, mean_acquisition_time_ns(scan))
+
+
+def twist_change(before: Velocity | None, after: Velocity | None) -> FloatArray | None:
+    """(3,) change of the twist across a scan, the step after's minus the step before's
+    (vx, vy [m/s], yaw rate [rad/s]); None unless both are known. The sweep twist's error grows
+    with it (a yaw-rate step inside the interval; `LoopCovarianceConfig.deskew_error_fraction`)."""
+    if before is None or after is None:
+        return None
+    return np.asarray(after.twist, dtype=np.float64) - np.asarray(before.twist, dtype=np.float64)

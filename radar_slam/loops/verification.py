@@ -39,6 +39,8 @@ def loop_covariance(
     disagreement: ArrayLike,
     yaw_rad: float,
     cfg: LoopCovarianceConfig,
+    deskew_variance: ArrayLike = (0.0, 0.0, 0.0),
+    turn_variance: float = 0.0,
 ) -> FloatArray:
     """Covariance (3, 3) of a verified loop measurement in GTSAM's tangent space.
 
@@ -50,6 +52,10 @@ def loop_covariance(
         yaw_rad: the loop's rotation (the match frame is turned by it from the query frame);
             GTSAM perturbs a between-factor on the right, i.e. in the match frame.
         cfg: the covariance model (see `LoopCovarianceConfig`).
+        deskew_variance: (3,) squared bends of the two scans' de-skew by their twists' changes
+            (`deskew_variance`) [m^2, m^2, rad^2], scaled by `cfg.deskew_error_fraction`^2.
+        turn_variance: the two scans' squared rotations over half a sweep
+            (`swept_turn_variance`) [rad^2], scaled by `cfg.swept_turn_fraction`^2 (yaw).
     """
     d = np.asarray(disagreement, dtype=np.float64)
     d_xy = float(np.hypot(d[0], d[1]))
@@ -58,8 +64,45 @@ def loop_covariance(
     floor_yaw = np.deg2rad(cfg.min_sigma_yaw_deg)
     cov = cfg.sigma_scale**2 * np.asarray(peak_covariance, dtype=np.float64)
     cov = cov + np.diag([(w * d_xy) ** 2, (w * d_xy) ** 2, (w * d_yaw) ** 2])
+    cov = cov + cfg.deskew_error_fraction**2 * np.diag(np.asarray(deskew_variance, dtype=float))
+    cov[2, 2] += cfg.swept_turn_fraction**2 * turn_variance
     cov = cov + np.diag([cfg.min_sigma_xy_m**2, cfg.min_sigma_xy_m**2, floor_yaw**2])
     return rotate_covariance(cov, -yaw_rad)  # the query frame is turned by -yaw in the match's
+
+
+def deskew_variance(*scans: KeyScan) -> FloatArray:
+    """(3,) sum over `scans` of the squared bend [m^2, m^2, rad^2] of de-skewing each with a
+    twist off by its change across the scan (`KeyScan.twist_change`) over half its sweep: the
+    translation isotropic (vx^2 + vy^2 on x and y), the rotation on yaw. A scan without a twist
+    change or azimuth times adds nothing."""
+    total = np.zeros(3)
+    for key_scan in scans:
+        half_sweep_s = _half_sweep_s(key_scan)
+        if key_scan.twist_change is None or half_sweep_s is None:
+            continue
+        bend = half_sweep_s * np.abs(np.asarray(key_scan.twist_change, dtype=np.float64))
+        xy = float(bend[0] ** 2 + bend[1] ** 2)
+        total += np.array([xy, xy, float(bend[2] ** 2)])
+    return total
+
+
+def swept_turn_variance(*scans: KeyScan) -> float:
+    """Sum over `scans` of the squared rotation [rad^2] each turns over half its sweep at its
+    de-skew yaw rate (`KeyScan.twist`); scans without a twist or azimuth times add nothing."""
+    total = 0.0
+    for key_scan in scans:
+        half_sweep_s = _half_sweep_s(key_scan)
+        if key_scan.twist is None or half_sweep_s is None:
+            continue
+        total += (half_sweep_s * float(key_scan.twist[2])) ** 2
+    return total
+
+
+def _half_sweep_s(key_scan: KeyScan) -> float | None:
+    times = key_scan.scan.azimuth_times_ns
+    if times is None or len(times) == 0:
+        return None
+    return 0.5 * float(np.max(times) - np.min(times)) / NS_PER_S
 
 
 def turned(scan: Scan, turn_rad: float) -> RadarFrame:
@@ -289,7 +332,12 @@ class GeometricVerifier:
                 estimate.quality,
             )
         covariance = loop_covariance(
-            estimate.covariance, disagreement, float(refined[2]), self.cfg.covariance
+            estimate.covariance,
+            disagreement,
+            float(refined[2]),
+            self.cfg.covariance,
+            deskew_variance(query, match),
+            swept_turn_variance(query, match),
         )
         return Verification(
             True, "", refined, covariance, initial, initial_quality, float(estimate.quality)

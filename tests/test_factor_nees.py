@@ -1,0 +1,117 @@
+"""Consistency of the pose graph's factors against the ground truth (`radar_slam.evaluation.nees`)
+and the loop covariance's de-skew terms (`LoopCovarianceConfig.deskew_error_fraction`,
+`swept_turn_fraction`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from odometry.scan import RadarFrame
+from radar_slam.datasets.frame import RadarSequence
+from radar_slam.evaluation.nees import factor_error, factor_nees
+from radar_slam.loops.config import LoopCovarianceConfig
+from radar_slam.loops.records import KeyScan
+from radar_slam.loops.verification import deskew_variance, loop_covariance, swept_turn_variance
+from radar_slam.pipeline import Pipeline, Results, load_config
+from radar_slam.pipeline.steps import odometry_factor
+from raplace.se2 import compose
+
+NEES_RANGE = (1.0, 6.0)
+"""Mean NEES of a factor type (3 when calibrated)."""
+CALIBRATED = {
+    "odometry": {"quality": {"deskew_error_fraction": 1.25, "min_sigma_yaw_deg": 0.05}},
+    "loop_closure": {
+        "covariance": {
+            "sigma_scale": 0.5,
+            "disagreement_weight": 0.1,
+            "min_sigma_xy_m": 0.01,
+            "min_sigma_yaw_deg": 0.02,
+            "deskew_error_fraction": 0.5,
+            "swept_turn_fraction": 0.1,
+        }
+    },
+}
+"""The settings that calibrate both factor types alike (README, covariance notes); not the
+defaults, which keep the loops' covariances conservative at 4 Hz (mean loop NEES 0.54 on
+`tiny_loop`, below `NEES_RANGE`)."""
+
+
+def test_factor_error_is_the_truth_seen_from_the_measurement() -> None:
+    truth_i = np.array([10.0, -2.0, 0.7])
+    measurement = np.array([3.0, 1.0, np.deg2rad(30.0)])
+    offset = np.array([0.05, -0.02, np.deg2rad(0.4)])
+    truth_j = compose(truth_i, compose(measurement, offset))
+    np.testing.assert_allclose(factor_error(measurement, truth_i, truth_j), offset, atol=1e-12)
+    covariance = np.diag([0.05**2, 0.04**2, np.deg2rad(0.2) ** 2])
+    result = factor_nees(measurement, covariance, truth_i, truth_j)
+    assert result.nees == pytest.approx(1.0 + 0.25 + 4.0)
+    np.testing.assert_allclose(result.axes, [1.0, 0.25, 4.0])
+
+
+def _scan(change: tuple[float, float, float] | None) -> KeyScan:
+    n_az = 400
+    times = np.linspace(0, 250_000_000, n_az, endpoint=False).astype(np.int64)
+    frame = RadarFrame(
+        timestamp_ns=250_000_000,
+        polar=np.zeros((n_az, 8), dtype=np.uint8),
+        azimuths_rad=np.linspace(0, 2 * np.pi, n_az, endpoint=False),
+        range_resolution_m=0.06,
+        sensor="test",
+        azimuth_times_ns=times,
+    )
+    twist_change = None if change is None else np.array(change)
+    return KeyScan(0, 250_000_000, frame, np.zeros(3), twist_change)
+
+
+def test_loop_covariance_grows_with_the_twist_change_of_both_scans() -> None:
+    """A yaw-rate step of 30 deg/s across a 250 ms sweep bends it by about 3.75 deg over half
+    the sweep; the term adds that fraction as a standard deviation per scan, and nothing for
+    scans whose twist did not change."""
+    half_sweep_s = 0.5 * 0.25 * 399 / 400
+    step = (1.0, 0.0, np.deg2rad(30.0))
+    variance = deskew_variance(_scan(step), _scan(None))
+    np.testing.assert_allclose(
+        variance, [half_sweep_s**2, half_sweep_s**2, (half_sweep_s * step[2]) ** 2]
+    )
+    np.testing.assert_allclose(deskew_variance(_scan(step), _scan(step)), 2 * variance)
+    cfg = LoopCovarianceConfig(deskew_error_fraction=0.5, swept_turn_fraction=0.1)
+    peak = np.diag([1e-4, 1e-4, 1e-6])
+    plain = loop_covariance(peak, np.zeros(3), 0.0, cfg)
+    bent = loop_covariance(peak, np.zeros(3), 0.0, cfg, variance)
+    np.testing.assert_allclose(np.diag(bent - plain), 0.25 * variance)
+    turning = _scan(None)
+    turning = KeyScan(0, turning.timestamp_ns, turning.scan, np.array([5.0, 0.0, 0.5]))
+    turn = swept_turn_variance(turning, _scan(None))
+    assert turn == pytest.approx((half_sweep_s * 0.5) ** 2)
+    swept = loop_covariance(peak, np.zeros(3), 0.0, cfg, turn_variance=turn)
+    np.testing.assert_allclose(np.diag(swept - plain), [0.0, 0.0, 0.01 * turn], atol=1e-18)
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tiny_loop: RadarSequence) -> Results:
+    return Pipeline(tiny_loop, load_config("synthetic", overrides=CALIBRATED)).run()
+
+
+def test_odometry_and_loop_factors_are_consistent(tiny_run: Results) -> None:
+    """On `synthetic/tiny_loop` (reduced bins) with the `CALIBRATED` settings, the odometry
+    factors the graph takes and the accepted loop factors both have a mean NEES in `NEES_RANGE`
+    against the ground truth, and every accepted loop is true."""
+    truth = tiny_run.ground_truth_poses
+    assert truth is not None
+    odometry = []
+    for r in tiny_run.odometry_results[1:]:
+        assert not r.gap
+        measurement, covariance = odometry_factor(r)
+        odometry.append(factor_nees(measurement, covariance, truth[r.index - 1], truth[r.index]))
+    loops = [
+        factor_nees(d.measurement, d.covariance, truth[d.query_key], truth[d.match_key])
+        for d in tiny_run.loops
+        if d.status == "accepted"
+    ]
+    assert len(loops) >= 3
+    assert tiny_run.metrics.loops_accepted_true == tiny_run.metrics.loops_accepted
+    odometry_mean = np.mean([f.nees for f in odometry])
+    loop_mean = np.mean([f.nees for f in loops])
+    assert NEES_RANGE[0] <= odometry_mean <= NEES_RANGE[1], odometry_mean
+    assert NEES_RANGE[0] <= loop_mean <= NEES_RANGE[1], loop_mean

@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.registration import MotionEstimate
+from odometry.registration import MotionEstimate, kinematic_reason
 from raplace.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -51,11 +51,7 @@ def agrees(motion: FloatArray, expected: FloatArray, cfg: OdometryConfig) -> boo
 
 def plausible_twist(twist: FloatArray, cfg: OdometryConfig) -> bool:
     """`twist` (vx, vy [m/s], yaw rate [rad/s]) is within the plausible speed and yaw rate."""
-    qcfg = cfg.quality
-    return bool(
-        np.hypot(twist[0], twist[1]) <= qcfg.max_speed_mps
-        and abs(twist[2]) <= np.deg2rad(qcfg.max_yaw_rate_dps)
-    )
+    return not kinematic_reason(twist, cfg)
 
 
 def fallback_references(

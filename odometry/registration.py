@@ -291,7 +291,7 @@ def register_images(
     reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, cfg)
     implausible = False
     if not reason:
-        reason = _kinematic_reason(motion, dt_s, cfg)
+        reason = kinematic_reason(twist_from_motion(motion, dt_s), cfg) if dt_s > 0 else ""
         implausible = bool(reason)
     if reason:
         logger.debug("registration failed: %s (motion %s)", reason, motion)
@@ -396,14 +396,16 @@ def _failure_reason(
     return ""
 
 
-def _kinematic_reason(motion: FloatArray, dt_s: float, cfg: OdometryConfig) -> str:
-    """Why `motion` over `dt_s` [s] is faster than the vehicle can move ("" when it is not)."""
+def kinematic_reason(twist: FloatArray, cfg: OdometryConfig) -> str:
+    """Why the body twist (vx, vy [m/s], yaw rate [rad/s]) is faster than the vehicle can move
+    or turn (`QualityConfig.max_speed_mps`, `max_yaw_rate_dps`); "" when it is not."""
     qcfg = cfg.quality
-    distance = float(np.hypot(motion[0], motion[1]))
-    if dt_s > 0 and distance / dt_s > qcfg.max_speed_mps:
-        return f"implausible speed {distance / dt_s:.1f} m/s"
-    if dt_s > 0 and np.rad2deg(abs(motion[2])) / dt_s > qcfg.max_yaw_rate_dps:
-        return f"implausible yaw rate {np.rad2deg(abs(motion[2])) / dt_s:.1f} deg/s"
+    speed = float(np.hypot(twist[0], twist[1]))
+    if speed > qcfg.max_speed_mps:
+        return f"implausible speed {speed:.1f} m/s"
+    yaw_rate_dps = float(np.rad2deg(abs(twist[2])))
+    if yaw_rate_dps > qcfg.max_yaw_rate_dps:
+        return f"implausible yaw rate {yaw_rate_dps:.1f} deg/s"
     return ""
 
 

@@ -95,7 +95,7 @@ class RotationConfig:
             toward zero for rotations below about a degree; its error leaks into a single
             refinement as a rotation error proportional to the rotation (see
             `scripts/diagnose_rotation_bias.py`). 2 removes that error, but the drives get no
-            better with it (the README's issue-10b notes), so 1 stays the default.
+            better with it (docs/odometry_notes.md, issue 10b), so 1 stays the default.
         refine_repeat_min_deg: the refinement is repeated only while its last correction was
             larger than this [deg] (the translation was made at a yaw off by that much).
     """
@@ -202,7 +202,7 @@ class QualityConfig:
         rotation bias); the two rotation terms are off (0): 0.1 and 1.25 make the odometry's own
         rotation covariances consistent in tight turns, but looser rotations in turns let the
         pose graph put the straight steps' rotation bias into the turns (SLAM ATE worse; the
-        README's covariance notes, `scripts/bench_nees.py`).
+        covariance notes in docs/odometry_notes.md, `scripts/bench_nees.py`).
     """
 
     min_peak_quality: float = 6.0

@@ -1,6 +1,6 @@
 """Diagnose the odometry's rotation bias (issue 10) with controlled cases, stage by stage.
 
-Sub-commands (each prints a small table; the README's issue-10 notes quote them):
+Sub-commands (each prints a small table; docs/odometry_notes.md quotes them):
 
 - `timestamps`: the per-azimuth timestamps of the real samples (MulRan raw CSV, Oxford PNG
   headers) against the straight line the odometry fits (`odometry.preprocess`), and the

@@ -36,9 +36,9 @@ CALIBRATED = {
         }
     },
 }
-"""The settings that calibrate both factor types alike (README, covariance notes); not the
-defaults, which keep the loops' covariances conservative at 4 Hz (mean loop NEES 0.54 on
-`tiny_loop`, below `NEES_RANGE`)."""
+"""The settings that calibrate both factor types alike (docs/odometry_notes.md, covariance
+notes); not the defaults, which keep the loops' covariances conservative at 4 Hz (mean loop
+NEES 0.54 on `tiny_loop`, below `NEES_RANGE`)."""
 
 
 def test_factor_error_is_the_truth_seen_from_the_measurement() -> None:

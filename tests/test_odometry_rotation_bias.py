@@ -5,7 +5,7 @@ few per cent of them), so the coarse translation was made at a yaw off by nearly
 rotation; its error leaked into the rotation refinement as a yaw error of about -3.7 % of the
 rotation at a 10 m baseline (-34 mdeg mean for 0.9 deg, up to -73). With the translation
 re-estimated at the refined yaw and the rotation refined again (`RotationConfig.refine_passes`
-2; the default stays 1, see the README's issue-10b notes) the error no longer follows the
+2; the default stays 1, see docs/odometry_notes.md, issue 10b) the error no longer follows the
 rotation.
 """
 

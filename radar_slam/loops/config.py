@@ -59,9 +59,9 @@ class LoopCovarianceConfig:
     The de-skew terms (on by default) cover the loops of scans swept while turning or across a
     velocity change at low frame rates, which were far too tight without them; the floors stay
     conservative (the loops' errors on real data are not measured), so at 4 Hz on the simulator
-    the covariances are wider than the errors. The README (covariance notes) gives the settings
-    calibrated against the simulator's ground truth (mean NEES, `scripts/bench_nees.py`) and
-    what the choices cost and gain in SLAM accuracy.
+    the covariances are wider than the errors. docs/odometry_notes.md (covariance notes) gives
+    the settings calibrated against the simulator's ground truth (mean NEES,
+    `scripts/bench_nees.py`) and what the choices cost and gain in SLAM accuracy.
 
     Attributes:
         sigma_scale: multiplies the peak-derived standard deviations.

@@ -20,7 +20,8 @@ the other side) is registered too and the stronger correlation decides which de-
 keeps: past motion cannot tell a turn that goes on tightening from a curvature step or a yaw-rate
 reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
 from the one its registration then measures (hard braking, a curvature step at a junction), the
-scan is re-rendered with the measured one and registered again.
+scan is re-rendered with the measured one and registered again; at low frame rates its yaw rate
+can also be searched by peak quality (`odometry.rate_search`, opt-in).
 
 Each registration is global (rotation over the full circle, translation over the whole coarse
 image; `registration.register_images`); the constant-velocity prediction is a search hint, never
@@ -44,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, recovery
+from odometry import OdometryError, rate_search, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.history import OdometryResult, ResultHistory
@@ -303,7 +304,7 @@ class Odometry:
     ) -> OdometryResult:
         """Place `scan` by its registration against `reference` and update the velocity and the
         keyframe."""
-        state = self._state
+        state, cfg = self._state, self.config
         previous, keyframe = state.previous, state.keyframe
         assert previous is not None and keyframe is not None
         if state.velocity is None:
@@ -321,6 +322,11 @@ class Odometry:
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
             scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
+            trend = None if state.velocity is None else self._velocity_at(_image_time_ns(scan))
+            if trend is not None and rate_search.wanted(scan, estimate, trend, interval_s, cfg):
+                scan, estimate = rate_search.searched(
+                    reference.scan, scan, estimate, cfg, register_images
+                )
             image_pose = compose(reference.image_pose, estimate.motion)
             before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)

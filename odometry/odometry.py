@@ -304,7 +304,7 @@ class Odometry:
     ) -> OdometryResult:
         """Place `scan` by its registration against `reference` and update the velocity and the
         keyframe."""
-        state, cfg = self._state, self.config
+        state = self._state
         previous, keyframe = state.previous, state.keyframe
         assert previous is not None and keyframe is not None
         if state.velocity is None:
@@ -322,11 +322,7 @@ class Odometry:
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
             scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
-            trend = None if state.velocity is None else self._velocity_at(_image_time_ns(scan))
-            if trend is not None and rate_search.wanted(scan, estimate, trend, interval_s, cfg):
-                scan, estimate = rate_search.searched(
-                    reference.scan, scan, estimate, cfg, register_images
-                )
+            scan, estimate = self._rate_searched(reference, scan, estimate, interval_s)
             image_pose = compose(reference.image_pose, estimate.motion)
             before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)
@@ -401,6 +397,18 @@ class Odometry:
         again = PreparedScan(scan.polar, measured, self.config)
         redone = register_images(reference.scan, again, self.config, hint=estimate.motion)
         return (again, redone) if redone.ok else (scan, estimate)
+
+    def _rate_searched(
+        self, reference: _ScanNode, scan: PreparedScan, estimate: MotionEstimate, interval_s: float
+    ) -> tuple[PreparedScan, MotionEstimate]:
+        """`scan` and its estimate, or the scan de-skewed at a yaw rate searched by peak quality
+        where the search is wanted (`rate_search`; opt-in, low frame rates)."""
+        if self._state.velocity is None:
+            return scan, estimate
+        trend, cfg = self._velocity_at(_image_time_ns(scan)), self.config
+        if not rate_search.wanted(scan, estimate, trend, interval_s, cfg):
+            return scan, estimate
+        return rate_search.searched(reference.scan, scan, estimate, cfg, register_images)
 
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(

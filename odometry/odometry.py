@@ -20,7 +20,8 @@ the other side) is registered too and the stronger correlation decides which de-
 keeps: past motion cannot tell a turn that goes on tightening from a curvature step or a yaw-rate
 reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
 from the one its registration then measures (hard braking, a curvature step at a junction), the
-scan is re-rendered with the measured one and registered again.
+scan is re-rendered with the measured one and registered again; at low frame rates its yaw rate
+can also be searched by peak quality (`odometry.rate_search`, opt-in).
 
 Each registration is global (rotation over the full circle, translation over the whole coarse
 image; `registration.register_images`); the constant-velocity prediction is a search hint, never
@@ -44,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, recovery
+from odometry import OdometryError, rate_search, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.history import OdometryResult, ResultHistory
@@ -321,6 +322,7 @@ class Odometry:
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
             scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
+            scan, estimate = self._rate_searched(reference, scan, estimate, interval_s)
             image_pose = compose(reference.image_pose, estimate.motion)
             before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)
@@ -395,6 +397,18 @@ class Odometry:
         again = PreparedScan(scan.polar, measured, self.config)
         redone = register_images(reference.scan, again, self.config, hint=estimate.motion)
         return (again, redone) if redone.ok else (scan, estimate)
+
+    def _rate_searched(
+        self, reference: _ScanNode, scan: PreparedScan, estimate: MotionEstimate, interval_s: float
+    ) -> tuple[PreparedScan, MotionEstimate]:
+        """`scan` and its estimate, or the scan de-skewed at a yaw rate searched by peak quality
+        where the search is wanted (`rate_search`; opt-in, low frame rates)."""
+        if self._state.velocity is None:
+            return scan, estimate
+        trend, cfg = self._velocity_at(_image_time_ns(scan)), self.config
+        if not rate_search.wanted(scan, estimate, trend, interval_s, cfg):
+            return scan, estimate
+        return rate_search.searched(reference.scan, scan, estimate, cfg, register_images)
 
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(

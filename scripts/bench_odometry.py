@@ -19,7 +19,7 @@ Two benchmarks:
 Usage: python scripts/bench_odometry.py [--frames N] [--speed MPS] [--yaw-rate DPS] [--scan PNG]
        python scripts/bench_odometry.py --sequence synthetic/loop --sequence synthetic/long
            [--held-out SEQ] [--stride 1 --stride 2 --stride 4] [--table FILE]
-           [--data-root DIR] [--max-frames N]
+           [--data-root DIR] [--max-frames N] [--config FILE.yaml]
 """
 
 from __future__ import annotations
@@ -40,12 +40,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 import odometry.odometry as odometry_module
+from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist
 from odometry.odometry import Odometry, OdometryResult
 from odometry.registration import MotionEstimate
 from radar_slam.datasets import RadarFrame, open_sequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import evaluate
+from radar_slam.pipeline import load_config
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory
 from raplace.se2 import between, compose, wrap_angle
@@ -184,14 +186,16 @@ def bench_sequence(
     plot_dir: Path | None,
     stride: int = 1,
     held_out: bool = False,
+    config: OdometryConfig | None = None,
 ) -> SequenceRow:
     """Run the odometry over one sequence (every `stride`-th scan) and log its accuracy and
-    speed; with `plot_dir`, save `odometry_<sequence>[_strideK].png` there (ground truth moved to
-    start at the first odometry pose)."""
+    speed (`config`: the odometry settings, defaults when None); with `plot_dir`, save
+    `odometry_<sequence>[_strideK].png` there (ground truth moved to start at the first
+    odometry pose)."""
     sequence = strided(open_sequence(spec, data_root=data_root), stride)
     label = spec if stride == 1 else f"{spec} --stride {stride}"
     n = len(sequence) if max_frames is None else min(len(sequence), max_frames)
-    odometry = Odometry()
+    odometry = Odometry(config)
     durations = []
     with _counted_registrations() as calls:
         for k in range(n):
@@ -322,6 +326,12 @@ def main() -> None:
     parser.add_argument("--data-root", type=Path, default=None, help="data root for --sequence")
     parser.add_argument("--max-frames", type=int, default=None, help="frames per --sequence")
     parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="a radar-slam config file whose odometry section is used (default: the defaults)",
+    )
+    parser.add_argument(
         "--plot-dir", type=Path, default=None, help="save a trajectory plot per --sequence here"
     )
     args = parser.parse_args()
@@ -329,8 +339,11 @@ def main() -> None:
     cv2.setNumThreads(1)  # one core; numpy's FFT is single-threaded already
     if args.sequence or args.held_out:
         specs = [(spec, False) for spec in args.sequence] + [(s, True) for s in args.held_out]
+        config = None if args.config is None else load_config(None, args.config).odometry
         rows = [
-            bench_sequence(spec, args.data_root, args.max_frames, args.plot_dir, stride, held)
+            bench_sequence(
+                spec, args.data_root, args.max_frames, args.plot_dir, stride, held, config
+            )
             for spec, held in specs
             for stride in args.stride or [1]
         ]
@@ -355,7 +368,7 @@ def main() -> None:
         for k, pose in enumerate(truth)
     ]
 
-    odometry = Odometry()
+    odometry = Odometry(config)
     durations = []
     for frame in frames:
         start = time.perf_counter()

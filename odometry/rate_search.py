@@ -1,0 +1,101 @@
+"""A new scan's de-skew yaw rate searched by correlation peak quality (low frame rates; opt-in).
+
+At 1 Hz the velocity a scan is de-skewed with is the mean over the second before it; through a
+yaw-rate step or reversal the sweep's own yaw rate can be tens of deg/s away. Rendered at a range
+of yaw rates and registered against the same reference, the peak quality is highest where the
+scan's de-skew matches the reference image's: it measures the sweep's yaw rate *relative to the
+reference's de-skew* (its error follows the reference's de-skew error), not the true one. Both
+images distorted alike register to a better relative motion than one distorted and one right
+(README, de-skew notes), which is what this search buys. It runs only where it can matter: a long
+interval between the image frames and a yaw-rate trend that disagrees with the kept de-skew
+(`DeskewConfig.yaw_rate_search_*`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry.config import OdometryConfig
+from odometry.registration import MotionEstimate, PreparedScan
+from odometry.velocity import REDESKEW_MPS, REDESKEW_RADPS, bounded_twist, close_twists
+
+FloatArray = NDArray[np.float64]
+Register = Callable[..., MotionEstimate]
+"""`registration.register_images` (passed in so that callers can count the registrations)."""
+MAX_VERTEX_STEPS = 3.0
+"""The parabola's vertex is tried at most this many half-widths from the kept yaw rate."""
+MIN_VERTEX_OFFSET = 0.25
+"""... and only when it is at least this many half-widths from every point already tried."""
+
+
+def wanted(
+    scan: PreparedScan,
+    estimate: MotionEstimate,
+    trend: FloatArray,
+    interval_s: float,
+    cfg: OdometryConfig,
+) -> bool:
+    """Whether to search `scan`'s de-skew yaw rate: the search is on, the scan is de-skewed and
+    registered (`estimate`), its image frame is `interval_s` [s] after the last one (at least
+    the configured interval), and the twist with the yaw-rate trend (`trend`, (3,)) is off the
+    kept de-skew by more than the re-de-skew limits."""
+    dcfg = cfg.deskew
+    return (
+        dcfg.yaw_rate_search_dps > 0.0
+        and scan.twist is not None
+        and estimate.ok
+        and interval_s >= dcfg.yaw_rate_search_min_interval_s
+        and not close_twists(trend, scan.twist, REDESKEW_MPS, REDESKEW_RADPS)
+    )
+
+
+def vertex_offset(qualities: tuple[float, float, float]) -> float | None:
+    """Where the parabola through peak qualities at offsets -1, 0, +1 (half-widths) peaks,
+    within +-`MAX_VERTEX_STEPS`; None when it opens upwards or the vertex is next to a point
+    already tried."""
+    low, mid, high = qualities
+    curvature = low - 2.0 * mid + high
+    if curvature >= 0.0:
+        return None
+    offset = float(np.clip(0.5 * (low - high) / curvature, -MAX_VERTEX_STEPS, MAX_VERTEX_STEPS))
+    if min(abs(offset), abs(abs(offset) - 1.0)) <= MIN_VERTEX_OFFSET:
+        return None
+    return offset
+
+
+def searched(
+    reference: PreparedScan,
+    scan: PreparedScan,
+    estimate: MotionEstimate,
+    cfg: OdometryConfig,
+    register: Register,
+) -> tuple[PreparedScan, MotionEstimate]:
+    """`scan` and its registration against `reference`, or the scan de-skewed at a searched yaw
+    rate and its registration (seeded with `estimate`) when that correlates more strongly by
+    more than `DeskewConfig.yaw_rate_search_min_gain`. It costs 2-3 registrations; the caller
+    decides whether to search (`wanted`)."""
+    assert scan.twist is not None
+    step = np.deg2rad(cfg.deskew.yaw_rate_search_dps)
+    base_twist = scan.twist
+
+    def tried(offset: float) -> tuple[PreparedScan, MotionEstimate]:
+        twist = base_twist.copy()
+        twist[2] += offset * step
+        again = PreparedScan(scan.polar, bounded_twist(twist, cfg), cfg)
+        return again, register(reference, again, cfg, hint=estimate.motion)
+
+    candidates = [tried(-1.0), (scan, estimate), tried(1.0)]
+    qualities = tuple(e.quality if e.ok else 0.0 for _, e in candidates)
+    offset = vertex_offset((qualities[0], qualities[1], qualities[2]))
+    if offset is not None:
+        candidates.append(tried(offset))
+    best = max(
+        (c for c in candidates if c[1].ok), key=lambda c: c[1].quality, default=(scan, estimate)
+    )
+    gain = cfg.deskew.yaw_rate_search_min_gain
+    if best[1].quality <= (1.0 + gain) * estimate.quality:
+        return scan, estimate
+    return best

@@ -300,13 +300,13 @@ class DeskewConfig:
             reference time with the velocity interpolated between the ones measured before
             and after it (`odometry.reference_time`); what `register` returns is not changed.
         yaw_rate_search_dps: in `Odometry`, the half-width [deg/s] of a search of a new scan's
-            de-skew yaw rate by correlation peak quality (`odometry.rate_search`; 0: off, the
-            default). Where it runs, the scan is also de-skewed at its yaw rate minus and plus
-            this, then at the parabola's vertex through the three peak qualities (within three
-            half-widths), each registered seeded with the first estimate; the strongest keeps its
-            de-skew. The peak quality measures the sweep's yaw rate relative to the reference
-            image's de-skew, so it matches the two images' distortions rather than finding the
-            true yaw rate (README, de-skew notes).
+            de-skew yaw rate by correlation peak quality (`odometry.rate_search`; 0: off). Where it
+            runs, the scan is also de-skewed at its yaw rate minus and plus this, then at the
+            parabola's vertex through the three peak qualities (within three half-widths), each
+            registered seeded with the first estimate; the strongest keeps its de-skew. The peak
+            quality measures the sweep's yaw rate relative to the reference image's de-skew, so it
+            matches the two images' distortions rather than finding the true yaw rate
+            (docs/odometry_notes.md, issue 10y).
         yaw_rate_search_min_interval_s: the search runs only when the time between the two
             image frames is at least this [s] (1 Hz; at 4 Hz it is 0.25 s, at 2 Hz 0.5 s) and the
             yaw-rate trend and the kept de-skew disagree (by more than the re-de-skew limits).
@@ -319,7 +319,7 @@ class DeskewConfig:
     mid_sweep: bool = True
     yaw_rate_extrapolation: float = 1.0
     revise_reference_pose: bool = True
-    yaw_rate_search_dps: float = 0.0
+    yaw_rate_search_dps: float = 16.0
     yaw_rate_search_min_interval_s: float = 0.75
     yaw_rate_search_min_gain: float = 0.05
 

@@ -21,7 +21,7 @@ keeps: past motion cannot tell a turn that goes on tightening from a curvature s
 reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
 from the one its registration then measures (hard braking, a curvature step at a junction), the
 scan is re-rendered with the measured one and registered again; at low frame rates its yaw rate
-can also be searched by peak quality (`odometry.rate_search`, opt-in).
+can also be searched by peak quality (`odometry.rate_search`, at low frame rates).
 
 Each registration is global (rotation over the full circle, translation over the whole coarse
 image; `registration.register_images`); the constant-velocity prediction is a search hint, never
@@ -402,7 +402,7 @@ class Odometry:
         self, reference: _ScanNode, scan: PreparedScan, estimate: MotionEstimate, interval_s: float
     ) -> tuple[PreparedScan, MotionEstimate]:
         """`scan` and its estimate, or the scan de-skewed at a yaw rate searched by peak quality
-        where the search is wanted (`rate_search`; opt-in, low frame rates)."""
+        where the search is wanted (`rate_search`: low frame rates)."""
         if self._state.velocity is None:
             return scan, estimate
         trend, cfg = self._velocity_at(_image_time_ns(scan)), self.config

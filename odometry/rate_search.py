@@ -1,4 +1,4 @@
-"""A new scan's de-skew yaw rate searched by correlation peak quality (low frame rates; opt-in).
+"""A new scan's de-skew yaw rate searched by correlation peak quality (low frame rates).
 
 At 1 Hz the velocity a scan is de-skewed with is the mean over the second before it; through a
 yaw-rate step or reversal the sweep's own yaw rate can be tens of deg/s away. Rendered at a range
@@ -6,9 +6,9 @@ of yaw rates and registered against the same reference, the peak quality is high
 scan's de-skew matches the reference image's: it measures the sweep's yaw rate *relative to the
 reference's de-skew* (its error follows the reference's de-skew error), not the true one. Both
 images distorted alike register to a better relative motion than one distorted and one right
-(README, de-skew notes), which is what this search buys. It runs only where it can matter: a long
-interval between the image frames and a yaw-rate trend that disagrees with the kept de-skew
-(`DeskewConfig.yaw_rate_search_*`).
+(docs/odometry_notes.md, issue 10y), which is what this search buys. It runs only where it can
+matter: a long interval between the image frames and a yaw-rate trend that disagrees with the kept
+de-skew (`DeskewConfig.yaw_rate_search_*`).
 """
 
 from __future__ import annotations

@@ -5,15 +5,15 @@ yaw rate the scan was de-skewed with (the one it kept, before and after the re-d
 the sweep's true mean yaw rate (ground truth of the full-rate sequence over the sweep). For the
 scans where the yaw rate is large or the de-skew is off (at most `--grid-scans` per sequence), the
 scan is rendered again at a grid of yaw rates around the one it kept (speed as kept) and
-registered against the same reference, seeded with the kept estimate; the peak quality as a
-function of the yaw rate is printed, with the parabolic maximum of the best three grid points, and
-how the maximum's error relates to the reference scan's de-skew error (README, de-skew notes: it
+registered against the same reference, seeded with the kept estimate; the peak quality as a function
+of the yaw rate is printed, with the parabolic maximum of the best three grid points, and how the
+maximum's error relates to the reference scan's de-skew error (docs/odometry_notes.md, issue 10y: it
 follows it, so the peak quality measures the yaw rate relative to the reference's de-skew).
 
 Usage: python scripts/diagnose_deskew_rate.py synthetic/roundabouts [SEQ ...] --stride 4
        [--data-root DIR] [--grid -24 -16 -8 -4 0 4 8 16 24] [--grid-scans 20] [--absolute]
-(the README's figures: --grid-scans 60 --absolute --grid $(seq -60 6 60) on roundabouts, u_turn,
-three_point_turn, junction_turns)
+(the figures in docs/odometry_notes.md: --grid-scans 60 --absolute --grid $(seq -60 6 60) on
+roundabouts, u_turn, three_point_turn, junction_turns)
 (tuning scenarios only: never the held-out drives.)
 """
 

@@ -226,7 +226,7 @@ def register(
     """Pose of `cur` in the frame of `ref` between their reference times (see the module
     docstring): `register_images` moved from the image frames to the reference frames; `hint`
     (3,) a predicted pose between the reference times, as `register_images`' hint."""
-    image_hint = None  # issue 15d: a hint between the reference times (loop checks)
+    image_hint = None
     if hint is not None:
         image_hint = compose(compose(inverse(ref.image_pose), hint), cur.image_pose)
     estimate = register_images(ref, cur, cfg, image_hint)

@@ -130,7 +130,7 @@ class _Entry:
     twist: FloatArray | None
     scan: Scan | None
     segment: int = 0
-    twist_change: FloatArray | None = None  # i10c: for the loop covariance's de-skew term
+    twist_change: FloatArray | None = None  # across the scan: the loop covariance's de-skew term
 
 
 class LoopDetector:

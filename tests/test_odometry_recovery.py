@@ -53,7 +53,8 @@ CALIBRATED = OdometryConfig(
     ),
     deskew=DeskewConfig(revise_reference_pose=False),
 )
-"""The covariance terms that make the odometry's own covariances consistent (off by default),
+"""The covariance terms that make the odometry's own covariances consistent (the two rotation
+terms are off by default),
 checked on the prompt results they are computed for (what a pose graph takes; `results` then
 holds them unrevised)."""
 NEES_RANGE = (1.0, 6.0)

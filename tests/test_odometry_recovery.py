@@ -54,9 +54,8 @@ CALIBRATED = OdometryConfig(
     deskew=DeskewConfig(revise_reference_pose=False),
 )
 """The covariance terms that make the odometry's own covariances consistent (the two rotation
-terms are off by default),
-checked on the prompt results they are computed for (what a pose graph takes; `results` then
-holds them unrevised)."""
+terms are off by default), checked on the prompt results they are computed for (what a pose
+graph takes; `results` then holds them unrevised)."""
 NEES_RANGE = (1.0, 6.0)
 """Mean normalised squared error of the scan-to-reference motions in hard driving at 4 Hz (3 when
 calibrated; 36-52 before the covariances grew with the turn and the velocity's change, see

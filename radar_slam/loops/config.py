@@ -74,9 +74,9 @@ class LoopCovarianceConfig:
             added as a standard deviation for each scan (translation [m], rotation [rad];
             `verification.deskew_variance`).
         swept_turn_fraction: a scan swept while turning is de-skewed with a yaw rate whose
-            error grows with it (the odometry's rotation bias per deg/s of de-skew error, see the
-            README); this fraction of the rotation over half a sweep at the scan's yaw rate is
-            added as a rotation standard deviation for each scan [rad]
+            error grows with it (the odometry's rotation bias per deg/s of de-skew error, see
+            docs/odometry_notes.md); this fraction of the rotation over half a sweep at the
+            scan's yaw rate is added as a rotation standard deviation for each scan [rad]
             (`verification.swept_turn_variance`).
     """
 

@@ -50,10 +50,17 @@ from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.history import OdometryResult, ResultHistory
 from odometry.preprocess import preprocess_polar
-from odometry.reference_time import interpolated_twist, pose_at_reference
+from odometry.reference_time import (
+    image_interval_s,
+    image_time_ns,
+    interpolated_twist,
+    move_centre_ns,
+    pose_at_reference,
+    seconds_to_ns,
+)
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
-from odometry.uncertainty import conversion_covariance, unseen_covariance
+from odometry.uncertainty import conversion_covariance, factor_covariance, unseen_covariance
 from odometry.velocity import (
     REDESKEW_MPS,
     REDESKEW_RADPS,
@@ -161,7 +168,7 @@ class Odometry:
         return self._velocity_at(state.previous.scan.timestamp_ns)
 
     @property
-    def prepared(self) -> PreparedScan | None:  # issue-15V: handed to loop verification
+    def prepared(self) -> PreparedScan | None:
         """The last registered scan's conditioned form with the spectra made so far (shared:
         treat as read-only), or None before the first scan."""
         previous = self._state.previous
@@ -206,7 +213,7 @@ class Odometry:
         twist = None
         if state.velocity is not None and cfg.deskew.enabled:
             twist = self._velocity_at(
-                polar.timestamp_ns + _ns(polar.mid_sweep_s or 0.0), trend=False
+                polar.timestamp_ns + seconds_to_ns(polar.mid_sweep_s or 0.0), trend=False
             )
         return PreparedScan(polar, twist, cfg)
 
@@ -237,7 +244,8 @@ class Odometry:
             return None
         twist = bounded_twist(velocity.twist, self.config)
         return compose(
-            previous.image_pose, motion_from_twist(twist, _image_interval_s(previous, scan, dt_s))
+            previous.image_pose,
+            motion_from_twist(twist, image_interval_s(previous.scan, scan, dt_s)),
         )
 
     def _references(self) -> list[_ScanNode]:
@@ -311,8 +319,8 @@ class Odometry:
             self._place_first_images(reference, scan, estimate.motion)
         # A gap's pose is a guess: measure the velocity from a registered scan instead.
         base = reference if previous.gap and reference is not previous else previous
-        interval_s = _image_interval_s(
-            base, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
+        interval_s = image_interval_s(
+            base.scan, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
         image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
         # A motion faster than a vehicle moves, or across a gap that hid more than the
@@ -340,7 +348,7 @@ class Odometry:
                 estimate.covariance,
                 change,
                 scan.image_time_s,
-                _image_interval_s(previous, scan, dt_s),
+                image_interval_s(previous.scan, scan, dt_s),
                 self.config.quality,
             ),
         )
@@ -348,7 +356,14 @@ class Odometry:
             estimate.motion, change, scan, self.config.quality
         )
         covariance = rotate_covariance(
-            _factor_covariance(registration_covariance, reference, node),
+            factor_covariance(
+                registration_covariance,
+                reference.pose,
+                reference.image_pose,
+                reference.conversion_covariance,
+                node.pose,
+                node.conversion_covariance,
+            ),
             float(between(previous.pose, reference.pose)[2]),
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
@@ -405,7 +420,7 @@ class Odometry:
         where the search is wanted (`rate_search`: low frame rates)."""
         if self._state.velocity is None:
             return scan, estimate
-        trend, cfg = self._velocity_at(_image_time_ns(scan)), self.config
+        trend, cfg = self._velocity_at(image_time_ns(scan)), self.config
         if not rate_search.wanted(scan, estimate, trend, interval_s, cfg):
             return scan, estimate
         return rate_search.searched(reference.scan, scan, estimate, cfg, register_images)
@@ -421,7 +436,7 @@ class Odometry:
         """
         state = self._state
         dt_s = (scan.timestamp_ns - reference.scan.timestamp_ns) / NS_PER_S
-        twist = twist_from_motion(image_motion, _image_interval_s(reference, scan, dt_s))
+        twist = twist_from_motion(image_motion, image_interval_s(reference.scan, scan, dt_s))
         for node in {id(n): n for n in (state.keyframe, state.previous, reference) if n}.values():
             node.image_pose = compose(node.pose, motion_from_twist(twist, node.scan.image_time_s))
 
@@ -443,7 +458,7 @@ class Odometry:
         returns its change from the last measurement (zeros for the first)."""
         state = self._state
         twist = twist_from_motion(between(base.image_pose, image_pose), interval_s)
-        centre_ns = (_image_time_ns(base.scan) + _image_time_ns(scan)) // 2
+        centre_ns = (image_time_ns(base.scan) + image_time_ns(scan)) // 2
         if state.velocity is None:
             state.velocity = Velocity(twist=twist, time_ns=centre_ns)
             return np.zeros(3)
@@ -455,7 +470,7 @@ class Odometry:
         """T_world_radar at the scan's reference time from its image pose, with the velocity
         expected between the two times."""
         assert self._state.velocity is not None
-        twist = self._velocity_at(_move_centre_ns(scan))
+        twist = self._velocity_at(move_centre_ns(scan))
         return pose_at_reference(image_pose, twist, scan.image_time_s)
 
     def _revise(self, node: _ScanNode, before: Velocity) -> None:
@@ -465,7 +480,7 @@ class Odometry:
         if not self.config.deskew.revise_reference_pose or after is None or node.index == 0:
             return
         twist = bounded_twist(
-            interpolated_twist(before, after, _move_centre_ns(node.scan)), self.config
+            interpolated_twist(before, after, move_centre_ns(node.scan)), self.config
         )
         self._state.history.revise(
             node.index, pose_at_reference(node.image_pose, twist, node.scan.image_time_s)
@@ -485,7 +500,7 @@ class Odometry:
         velocity = self._state.velocity
         if velocity is None or not self.config.deskew.enabled or scan.polar.timing is None:
             return scan
-        new = self._velocity_at(_image_time_ns(scan))
+        new = self._velocity_at(image_time_ns(scan))
         if scan.twist is not None and close_twists(new, scan.twist):
             return scan
         return PreparedScan(scan.polar, new, self.config)
@@ -498,7 +513,7 @@ class Odometry:
         more strongly; nothing is tried when the trend hardly changes the twist."""
         if scan.twist is None or self._state.velocity is None:
             return scan, estimate
-        trend = self._velocity_at(_image_time_ns(scan))
+        trend = self._velocity_at(image_time_ns(scan))
         if close_twists(trend, scan.twist):
             return scan, estimate
         alternative = PreparedScan(scan.polar, trend, self.config)
@@ -577,38 +592,3 @@ class Odometry:
         )
         self._state.history.append(result)
         return result
-
-
-def _image_interval_s(previous: _ScanNode, scan: PreparedScan, dt_s: float) -> float:
-    """Time [s] from `previous`'s image time to `scan`'s, `dt_s` apart in reference time."""
-    return dt_s + scan.image_time_s - previous.scan.image_time_s
-
-
-def _ns(seconds: float) -> int:
-    return int(round(seconds * NS_PER_S))
-
-
-def _image_time_ns(scan: PreparedScan) -> int:
-    """Absolute time of a scan's image frame [ns]."""
-    return scan.timestamp_ns + _ns(scan.image_time_s)
-
-
-def _move_centre_ns(scan: PreparedScan) -> int:
-    """The middle of the move from a scan's image time to its reference time [ns]."""
-    return (_image_time_ns(scan) + scan.timestamp_ns) // 2
-
-
-def _factor_covariance(
-    registration_covariance: FloatArray, reference: _ScanNode, node: _ScanNode
-) -> FloatArray:
-    """Covariance (reference axes) of `node`'s pose in `reference`'s frame: the registration of
-    the image frames (reference image axes) plus both conversions to reference times."""
-    return (
-        rotate_covariance(
-            registration_covariance, float(between(reference.pose, reference.image_pose)[2])
-        )
-        + reference.conversion_covariance
-        + rotate_covariance(
-            node.conversion_covariance, float(between(reference.pose, node.pose)[2])
-        )
-    )

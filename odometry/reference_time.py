@@ -15,8 +15,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.deskew import motion_from_twist
+from odometry.registration import PreparedScan
 from odometry.velocity import Velocity
 from raplace.se2 import compose, inverse
+from raplace.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
 
@@ -36,3 +38,23 @@ def interpolated_twist(before: Velocity, after: Velocity, time_ns: int) -> Float
         return np.asarray(after.twist, dtype=np.float64).copy()
     fraction = float(np.clip((time_ns - before.time_ns) / span_ns, 0.0, 1.0))
     return np.asarray((1.0 - fraction) * before.twist + fraction * after.twist, dtype=np.float64)
+
+
+def seconds_to_ns(seconds: float) -> int:
+    """A duration [s] in integer nanoseconds (rounded)."""
+    return int(round(seconds * NS_PER_S))
+
+
+def image_time_ns(scan: PreparedScan) -> int:
+    """Absolute time of a scan's image frame [ns]."""
+    return scan.timestamp_ns + seconds_to_ns(scan.image_time_s)
+
+
+def move_centre_ns(scan: PreparedScan) -> int:
+    """The middle of the move from a scan's image time to its reference time [ns]."""
+    return (image_time_ns(scan) + scan.timestamp_ns) // 2
+
+
+def image_interval_s(previous: PreparedScan, scan: PreparedScan, dt_s: float) -> float:
+    """Time [s] from `previous`'s image time to `scan`'s, `dt_s` apart in reference time."""
+    return dt_s + scan.image_time_s - previous.image_time_s

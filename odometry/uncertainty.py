@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from odometry.config import QualityConfig
 from odometry.registration import PreparedScan
-from raplace.se2 import wrap_angle
+from raplace.se2 import between, rotate_covariance, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -54,3 +54,24 @@ def unseen_covariance(
     sigma_yaw = quality.sigma_yaw_deg_per_deg * abs(wrap_angle(float(motion[2])))
     sigma_bend_yaw = quality.deskew_yaw_error_fraction * float(bend[2])
     return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_yaw**2 + sigma_bend_yaw**2])
+
+
+def factor_covariance(
+    registration_covariance: FloatArray,
+    reference_pose: FloatArray,
+    reference_image_pose: FloatArray,
+    reference_conversion: FloatArray,
+    pose: FloatArray,
+    conversion: FloatArray,
+) -> FloatArray:
+    """(3, 3) covariance (reference axes) of the pose `pose` (3,) in the frame of the reference
+    at `reference_pose` (3,): the registration of the image frames (`registration_covariance`,
+    in the axes of the reference's image pose `reference_image_pose`) plus both conversions to
+    reference times (`reference_conversion`, `conversion`, each in its own scan's axes)."""
+    return (
+        rotate_covariance(
+            registration_covariance, float(between(reference_pose, reference_image_pose)[2])
+        )
+        + reference_conversion
+        + rotate_covariance(conversion, float(between(reference_pose, pose)[2]))
+    )

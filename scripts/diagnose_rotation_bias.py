@@ -18,8 +18,11 @@ Sub-commands (each prints a small table; docs/odometry_notes.md quotes them):
 - `sim`: 10 m straight drives at 10 m/s through `loop`'s town rendered by the simulator, paired
   with the same drives with the facades' slant range, the traffic or the motion distortion
   switched off (the same speckle seeds): what each contributes to the yaw error.
+- `forward`: the forward translation error of such drives against the baseline (1-10 m), with
+  the simulator's effects switched off in turn: the short-baseline overestimate that makes
+  keyframes 10 m apart drift less than 5 m apart.
 
-Usage: python scripts/diagnose_rotation_bias.py {timestamps,geometry,rotation,deskew,sim}
+Usage: python scripts/diagnose_rotation_bias.py {timestamps,geometry,rotation,deskew,sim,forward}
        [--scenes N] [--shared-data DIR]
 """
 
@@ -241,9 +244,14 @@ def deskew(n_scenes: int) -> None:
 
 
 def _sim_errors(
-    starts: list[FloatArray], world: object, physics: object, scene: object
+    starts: list[FloatArray],
+    world: object,
+    physics: object,
+    scene: object,
+    baseline_m: float = 10.0,
 ) -> FloatArray:
-    """Yaw errors [mdeg] of 10 m registrations of straight 10 m/s drives from `starts`."""
+    """(n, 2) errors of `baseline_m` registrations of straight 10 m/s drives from `starts`: yaw
+    [mdeg] and forward translation [mm]."""
     from radar_slam.datasets.frame import RadarFrame
     from radar_slam.datasets.mulran import uniform_azimuth_times_ns
     from radar_slam.sim.render import Renderer
@@ -253,14 +261,15 @@ def _sim_errors(
     distorted = physics.motion_distortion.enabled  # type: ignore[attr-defined]
     twist = np.array([10.0, 0.0, 0.0])
     cfg = OdometryConfig(deskew=DeskewConfig(enabled=distorted, iterations=0))
+    ends_s = (0.5, 0.5 + baseline_m / 10.0)
     errors = []
     for k, p0 in enumerate(starts):
-        t = np.arange(0.0, 3.0, 0.01)
+        t = np.arange(0.0, ends_s[1] + 1.5, 0.01)
         poses = np.c_[p0[0] + 10 * t * np.cos(p0[2]), p0[1] + 10 * t * np.sin(p0[2]), 0 * t + p0[2]]
-        drive = Trajectory(t_s=t, poses=poses, length_m=30.0)
+        drive = Trajectory(t_s=t, poses=poses, length_m=10.0 * float(t[-1]))
         renderer = Renderer(world, drive, sensor, physics)  # type: ignore[arg-type]
         scans = []
-        for end_s in (0.5, 1.5):
+        for end_s in ends_s:
             polar = renderer.scan(end_s, np.random.default_rng([7, k, int(end_s * 10)]))
             end_ns = int(end_s * 1e9)
             times = uniform_azimuth_times_ns(end_ns, SWEEP_NS, N_AZIMUTHS) if distorted else None
@@ -269,16 +278,16 @@ def _sim_errors(
                     end_ns, polar, column_azimuths_rad(), sensor.range_resolution_m, "sim", times
                 )
             )
-        truth = se2.between(*drive.radar_poses(np.array([0.5, 1.5])))
+        truth = se2.between(*drive.radar_poses(np.array(ends_s)))
         estimate = estimate_motion(scans[0], scans[1], cfg, twist=twist if distorted else None)
-        errors.append(np.degrees(se2.wrap_angle(estimate.dyaw - truth[2])) * 1e3)
+        yaw_mdeg = np.degrees(se2.wrap_angle(estimate.dyaw - truth[2])) * 1e3
+        errors.append([yaw_mdeg, (estimate.dx - truth[0]) * 1e3])
     return np.array(errors)
 
 
-def sim(n_drives: int) -> None:
-    """Paired simulator experiments on straight drives through `loop`'s town."""
+def _straight_starts(n_drives: int) -> tuple[object, list[FloatArray]]:
+    """`loop`'s scene and up to `n_drives` start poses on straight pieces of its route."""
     from radar_slam.sim.generate import build_scene
-    from radar_slam.sim.scatterers import no_traffic
     from radar_slam.sim.scenarios import get_scenario
 
     scene = build_scene(get_scenario("loop"))
@@ -288,7 +297,14 @@ def sim(n_drives: int) -> None:
         i, j = np.searchsorted(route.t_s, [t0 - 0.5, t0 + 1.5])
         if np.ptp(route.poses[i:j, 2]) < np.radians(1.0):  # a straight piece of the route
             starts.append(route.base_poses(np.array([t0]))[0])
-    starts = starts[:n_drives]
+    return scene, starts[:n_drives]
+
+
+def sim(n_drives: int) -> None:
+    """Paired simulator experiments on straight drives through `loop`'s town."""
+    from radar_slam.sim.scatterers import no_traffic
+
+    scene, starts = _straight_starts(n_drives)
     phys = scene.scenario.physics
     off = dataclasses.replace
     still = off(phys, motion_distortion=off(phys.motion_distortion, enabled=False))
@@ -296,12 +312,14 @@ def sim(n_drives: int) -> None:
     moving_flat = off(phys, elevation=off(phys.elevation, enabled=False))
     quiet = off(scene.world, traffic=no_traffic())
     runs: dict[str, Callable[[], FloatArray]] = {
-        "undistorted": lambda: _sim_errors(starts, scene.world, still, scene),
-        "undistorted, no traffic": lambda: _sim_errors(starts, quiet, still, scene),
-        "undistorted, no traffic, no slant range": lambda: _sim_errors(starts, quiet, flat, scene),
+        "undistorted": lambda: _sim_errors(starts, scene.world, still, scene)[:, 0],
+        "undistorted, no traffic": lambda: _sim_errors(starts, quiet, still, scene)[:, 0],
+        "undistorted, no traffic, no slant range": lambda: _sim_errors(starts, quiet, flat, scene)[
+            :, 0
+        ],
         "distorted + exact de-skew, no traffic, no slant range": lambda: _sim_errors(
             starts, quiet, moving_flat, scene
-        ),
+        )[:, 0],
     }
     results = {name: run() for name, run in runs.items()}
     names = list(results)
@@ -312,9 +330,43 @@ def sim(n_drives: int) -> None:
         print(f"paired: {label} | {_mean_se(results[names[a]] - results[names[b]])}")
 
 
+def forward(n_drives: int) -> None:
+    """Forward translation error against the baseline on straight drives through `loop`'s
+    town: the whole simulator, and without traffic, motion distortion and slant range, then
+    also without each of multipath ghosts and the range point-spread."""
+    from radar_slam.sim.scatterers import no_traffic
+
+    scene, starts = _straight_starts(n_drives)
+    phys = scene.scenario.physics  # type: ignore[attr-defined]
+    off = dataclasses.replace
+    plain = off(
+        phys,
+        motion_distortion=off(phys.motion_distortion, enabled=False),
+        elevation=off(phys.elevation, enabled=False),
+    )
+    quiet = off(scene.world, traffic=no_traffic())  # type: ignore[attr-defined]
+    cases = {
+        "whole simulator (de-skewed with the exact twist)": (scene.world, phys),  # type: ignore[attr-defined]
+        "no traffic, distortion, slant range": (quiet, plain),
+        "... and no multipath": (quiet, off(plain, multipath=off(plain.multipath, enabled=False))),
+        "... and no range point-spread": (
+            quiet,
+            off(plain, range_psf=off(plain.range_psf, enabled=False)),
+        ),
+    }
+    baselines = (1.0, 2.5, 5.0, 7.5, 10.0)
+    print(f"{len(starts)} straight drives at 10 m/s; forward error [mm] mean +- s.e. per baseline")
+    print("case | " + " | ".join(f"{b:g} m" for b in baselines))
+    for name, (world, physics) in cases.items():
+        cells = [_mean_se(_sim_errors(starts, world, physics, scene, b)[:, 1]) for b in baselines]
+        print(f"{name} | " + " | ".join(cells), flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("what", choices=["timestamps", "geometry", "rotation", "deskew", "sim"])
+    parser.add_argument(
+        "what", choices=["timestamps", "geometry", "rotation", "deskew", "sim", "forward"]
+    )
     parser.add_argument("--scenes", type=int, default=8, help="scenes / drives per case")
     parser.add_argument("--full", action="store_true", help="rotation: at MulRan's 3360 bins")
     parser.add_argument(
@@ -331,8 +383,10 @@ def main() -> None:
         rotation(args.scenes, args.full)
     elif args.what == "deskew":
         deskew(args.scenes)
-    else:
+    elif args.what == "sim":
         sim(args.scenes)
+    else:
+        forward(args.scenes)
 
 
 if __name__ == "__main__":

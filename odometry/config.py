@@ -262,8 +262,8 @@ class KeyframeConfig:
             gap's pose is only a prediction; see `odometry.recovery`).
     """
 
-    max_translation_m: float = 5.0
-    max_rotation_deg: float = 10.0
+    max_translation_m: float = 10.0
+    max_rotation_deg: float = 15.0
     min_peak_quality: float = 12.0
     max_frames: int = 8
     fallback_keyframes: int = 2

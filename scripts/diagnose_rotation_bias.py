@@ -56,6 +56,7 @@ from odometry.deskew import motion_from_twist, sampling_maps  # noqa: E402
 from odometry.registration import estimate_motion  # noqa: E402
 from odometry.scan import Scan  # noqa: E402
 from radar_slam.datasets.mulran import column_azimuths_rad  # noqa: E402
+from radar_slam.sim.generate import Scene, build_scene  # noqa: E402
 from raplace import se2  # noqa: E402
 
 FloatArray = NDArray[np.float64]
@@ -285,9 +286,8 @@ def _sim_errors(
     return np.array(errors)
 
 
-def _straight_starts(n_drives: int) -> tuple[object, list[FloatArray]]:
+def _straight_starts(n_drives: int) -> tuple[Scene, list[FloatArray]]:
     """`loop`'s scene and up to `n_drives` start poses on straight pieces of its route."""
-    from radar_slam.sim.generate import build_scene
     from radar_slam.sim.scenarios import get_scenario
 
     scene = build_scene(get_scenario("loop"))
@@ -337,16 +337,16 @@ def forward(n_drives: int) -> None:
     from radar_slam.sim.scatterers import no_traffic
 
     scene, starts = _straight_starts(n_drives)
-    phys = scene.scenario.physics  # type: ignore[attr-defined]
+    phys = scene.scenario.physics
     off = dataclasses.replace
     plain = off(
         phys,
         motion_distortion=off(phys.motion_distortion, enabled=False),
         elevation=off(phys.elevation, enabled=False),
     )
-    quiet = off(scene.world, traffic=no_traffic())  # type: ignore[attr-defined]
+    quiet = off(scene.world, traffic=no_traffic())
     cases = {
-        "whole simulator (de-skewed with the exact twist)": (scene.world, phys),  # type: ignore[attr-defined]
+        "whole simulator (de-skewed with the exact twist)": (scene.world, phys),
         "no traffic, distortion, slant range": (quiet, plain),
         "... and no multipath": (quiet, off(plain, multipath=off(plain.multipath, enabled=False))),
         "... and no range point-spread": (

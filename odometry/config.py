@@ -197,6 +197,9 @@ class QualityConfig:
             times half a sweep; this multiple of the translation bend is added as a standard
             deviation [m] (above 1 because the measured change itself lags the true one).
         deskew_yaw_error_fraction: the same for the rotation bend [rad].
+        revised_velocity_lag_fraction: in `Odometry`, once a scan's pose is revised with the
+            velocity interpolated across it, the error of that velocity is taken as this
+            fraction of the change of the velocity's change, per axis.
         The translation term is on (1.25: it calibrates the translation of turning steps at
         1 Hz) and the rotation floor is 0.05 deg (it leaves room for the straight steps'
         rotation bias); the two rotation terms are off (0): 0.1 and 1.25 make the odometry's own
@@ -220,6 +223,7 @@ class QualityConfig:
     sigma_yaw_deg_per_deg: float = 0.0
     deskew_error_fraction: float = 1.25
     deskew_yaw_error_fraction: float = 0.0
+    revised_velocity_lag_fraction: float = 0.25
 
     def __post_init__(self) -> None:
         for name in (
@@ -244,6 +248,7 @@ class QualityConfig:
             "sigma_yaw_deg_per_deg",
             "deskew_error_fraction",
             "deskew_yaw_error_fraction",
+            "revised_velocity_lag_fraction",
         ):
             checks.non_negative(name, getattr(self, name))
 

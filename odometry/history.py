@@ -85,12 +85,15 @@ class ResultHistory:
             result = self._chained(result, result.pose)
         self._results.append(result)
 
-    def revise(self, index: int, pose: FloatArray) -> None:
+    def revise(self, index: int, pose: FloatArray, covariance: FloatArray | None = None) -> None:
         """Move the last scan (`index`) to `pose`, its revised T_world_radar at its reference
-        time."""
+        time, with `covariance` (as `OdometryResult.covariance`; None: unchanged)."""
         if index != len(self._results) - 1 or index == 0:
             raise ValueError(f"only the last scan after the first can be revised, not {index}")
-        self._results[index] = self._chained(self._results[index], pose)
+        result = self._chained(self._results[index], pose)
+        if covariance is not None:
+            result = dataclasses.replace(result, covariance=np.asarray(covariance, np.float64))
+        self._results[index] = result
 
     def _chained(self, result: OdometryResult, pose: FloatArray) -> OdometryResult:
         """`result` at `pose`, its motions relative to the history's earlier poses."""

@@ -40,7 +40,6 @@ and a strong registration the kinematic limits reject beats a weaker one or a ga
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -48,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from odometry import OdometryError, rate_search, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.history import OdometryResult, ResultHistory
+from odometry.history import OdometryResult
 from odometry.preprocess import preprocess_polar
 from odometry.reference_time import (
     image_interval_s,
@@ -60,7 +59,15 @@ from odometry.reference_time import (
 )
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
-from odometry.uncertainty import conversion_covariance, factor_covariance, unseen_covariance
+from odometry.state import OdometryState, ScanNode
+from odometry.uncertainty import (
+    RevisionTerms,
+    conversion_covariance,
+    factor_covariance,
+    revised_conversion_covariance,
+    revised_factor_covariance,
+    unseen_covariance,
+)
 from odometry.velocity import (
     REDESKEW_MPS,
     REDESKEW_RADPS,
@@ -76,32 +83,6 @@ logger = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 
 
-@dataclass
-class _ScanNode:
-    """A scan: its pose at its reference time and the pose of its image frame (`image_pose`,
-    world frame; see `PreparedScan`), which the registrations chain. A gap's (`gap`) poses are
-    the constant-velocity prediction."""
-
-    index: int
-    pose: FloatArray
-    image_pose: FloatArray
-    scan: PreparedScan
-    frames: int = 0
-    gap: bool = False
-    conversion_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
-    """Covariance (own axes) that moving the image pose to the reference time adds to `pose`."""
-
-
-@dataclass
-class _State:
-    keyframe: _ScanNode | None = None
-    previous: _ScanNode | None = None  # the previous scan (same fields as a keyframe)
-    last_registered: _ScanNode | None = None  # the last scan that was not a gap
-    earlier_keyframes: list[_ScanNode] = field(default_factory=list)  # most recent first
-    velocity: Velocity | None = None
-    history: ResultHistory = field(default_factory=ResultHistory)
-
-
 class Odometry:
     """Phase-correlation radar odometry over a stream of scans.
 
@@ -115,7 +96,7 @@ class Odometry:
     ) -> None:
         self.config = OdometryConfig() if config is None else config
         self.start_pose = np.asarray(start_pose, dtype=np.float64).reshape(3)
-        self._state = _State()
+        self._state = OdometryState()
 
     # -- results ------------------------------------------------------------------------------
     @property
@@ -176,7 +157,7 @@ class Odometry:
 
     def reset(self) -> None:
         """Forget every scan (the next one starts again at `start_pose`)."""
-        self._state = _State()
+        self._state = OdometryState()
 
     # -- the per-frame step -------------------------------------------------------------------
     def register(self, frame: Scan) -> OdometryResult:
@@ -221,7 +202,7 @@ class Odometry:
         """The first scan: placed at `start_pose`, the first keyframe."""
         state = self._state
         start = self.start_pose.copy()
-        node = _ScanNode(index=index, pose=start, image_pose=start.copy(), scan=scan)
+        node = ScanNode(index=index, pose=start, image_pose=start.copy(), scan=scan)
         state.keyframe = state.previous = state.last_registered = node
         return self._record(
             node,
@@ -235,7 +216,7 @@ class Odometry:
         )
 
     def _predicted_image_pose(
-        self, previous: _ScanNode, scan: PreparedScan, dt_s: float
+        self, previous: ScanNode, scan: PreparedScan, dt_s: float
     ) -> FloatArray | None:
         """The image pose (world) the constant-velocity model expects for `scan` (None before
         any velocity is known)."""
@@ -248,7 +229,7 @@ class Odometry:
             motion_from_twist(twist, image_interval_s(previous.scan, scan, dt_s)),
         )
 
-    def _references(self) -> list[_ScanNode]:
+    def _references(self) -> list[ScanNode]:
         """Scans to register against, in order (`recovery.fallback_references`)."""
         state = self._state
         return recovery.fallback_references(
@@ -257,7 +238,7 @@ class Odometry:
 
     def _search(
         self, index: int, scan: PreparedScan, predicted: FloatArray | None
-    ) -> tuple[_ScanNode | None, MotionEstimate]:
+    ) -> tuple[ScanNode | None, MotionEstimate]:
         """The reference `scan` registers against and the estimate (`recovery.chosen`; None
         and the last failed estimate when none does)."""
         tried = []
@@ -275,7 +256,7 @@ class Odometry:
         return recovery.chosen(tried)
 
     def _registered(
-        self, reference: _ScanNode, scan: PreparedScan, predicted: FloatArray | None
+        self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
     ) -> MotionEstimate:
         """Register `scan`'s image against `reference`'s: globally, and when that fails or
         disagrees with the prediction also seeded with the prediction; the stronger correlation
@@ -306,7 +287,7 @@ class Odometry:
         self,
         index: int,
         scan: PreparedScan,
-        reference: _ScanNode,
+        reference: ScanNode,
         estimate: MotionEstimate,
         dt_s: float,
     ) -> OdometryResult:
@@ -339,32 +320,44 @@ class Odometry:
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
-        node = _ScanNode(
+        interval_s = image_interval_s(previous.scan, scan, dt_s)
+        node = ScanNode(
             index=index,
             pose=pose,
             image_pose=image_pose,
             scan=scan,
             conversion_covariance=conversion_covariance(
-                estimate.covariance,
-                change,
-                scan.image_time_s,
-                image_interval_s(previous.scan, scan, dt_s),
-                self.config.quality,
+                estimate.covariance, change, scan.image_time_s, interval_s, self.config.quality
             ),
         )
         registration_covariance = estimate.covariance + unseen_covariance(
             estimate.motion, change, scan, self.config.quality
         )
-        covariance = rotate_covariance(
-            factor_covariance(
-                registration_covariance,
-                reference.pose,
-                reference.image_pose,
-                reference.conversion_covariance,
-                node.pose,
-                node.conversion_covariance,
-            ),
-            float(between(previous.pose, reference.pose)[2]),
+        turn = float(between(previous.pose, reference.pose)[2])
+        covariance, fixed = (
+            rotate_covariance(
+                factor_covariance(
+                    registration_covariance,
+                    reference.pose,
+                    reference.image_pose,
+                    reference_conversion,
+                    node.pose,
+                    conversion,
+                ),
+                turn,
+            )
+            for reference_conversion, conversion in (
+                (reference.conversion_covariance, node.conversion_covariance),
+                (reference.settled_conversion, np.zeros((3, 3))),
+            )
+        )
+        node.revision = RevisionTerms(
+            fixed=fixed,
+            conversion_angle=float(between(previous.pose, pose)[2]),
+            registration_covariance=estimate.covariance,
+            image_time_s=scan.image_time_s,
+            interval_s=interval_s,
+            velocity_change=change,
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
@@ -391,8 +384,8 @@ class Odometry:
 
     def _redeskewed(
         self,
-        reference: _ScanNode,
-        base: _ScanNode,
+        reference: ScanNode,
+        base: ScanNode,
         scan: PreparedScan,
         estimate: MotionEstimate,
         interval_s: float,
@@ -414,7 +407,7 @@ class Odometry:
         return (again, redone) if redone.ok else (scan, estimate)
 
     def _rate_searched(
-        self, reference: _ScanNode, scan: PreparedScan, estimate: MotionEstimate, interval_s: float
+        self, reference: ScanNode, scan: PreparedScan, estimate: MotionEstimate, interval_s: float
     ) -> tuple[PreparedScan, MotionEstimate]:
         """`scan` and its estimate, or the scan de-skewed at a yaw rate searched by peak quality
         where the search is wanted (`rate_search`: low frame rates)."""
@@ -427,7 +420,7 @@ class Odometry:
 
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(
-        self, reference: _ScanNode, scan: PreparedScan, image_motion: FloatArray
+        self, reference: ScanNode, scan: PreparedScan, image_motion: FloatArray
     ) -> None:
         """Place the image frames of the scans registered before any velocity was known.
 
@@ -452,7 +445,7 @@ class Odometry:
         return bounded_twist(self._state.velocity.at(time_ns, gain), self.config)
 
     def _update_velocity(
-        self, base: _ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float
+        self, base: ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float
     ) -> FloatArray:
         """Measure the twist between `base`'s image pose and this scan's (`interval_s` apart);
         returns its change from the last measurement (zeros for the first)."""
@@ -473,7 +466,7 @@ class Odometry:
         twist = self._velocity_at(move_centre_ns(scan))
         return pose_at_reference(image_pose, twist, scan.image_time_s)
 
-    def _revise(self, node: _ScanNode, before: Velocity) -> None:
+    def _revise(self, node: ScanNode, before: Velocity) -> None:
         """Revise the previous scan's pose in the history now that the velocity after its image
         time is measured too (`before` was measured up to it; see `odometry.reference_time`)."""
         after = self._state.velocity
@@ -482,11 +475,19 @@ class Odometry:
         twist = bounded_twist(
             interpolated_twist(before, after, move_centre_ns(node.scan)), self.config
         )
+        covariance = None
+        if node.revision is not None:
+            node.revised_conversion = revised_conversion_covariance(
+                node.revision, after.twist - before.twist, self.config.quality
+            )
+            covariance = revised_factor_covariance(node.revision, node.revised_conversion)
         self._state.history.revise(
-            node.index, pose_at_reference(node.image_pose, twist, node.scan.image_time_s)
+            node.index,
+            pose_at_reference(node.image_pose, twist, node.scan.image_time_s),
+            covariance,
         )
 
-    def _needs_keyframe(self, estimate: MotionEstimate, keyframe: _ScanNode) -> bool:
+    def _needs_keyframe(self, estimate: MotionEstimate, keyframe: ScanNode) -> bool:
         kcfg = self.config.keyframe
         return bool(
             np.hypot(estimate.dx, estimate.dy) >= kcfg.max_translation_m
@@ -506,7 +507,7 @@ class Odometry:
         return PreparedScan(scan.polar, new, self.config)
 
     def _trend_hypothesis(
-        self, reference: _ScanNode, scan: PreparedScan, estimate: MotionEstimate
+        self, reference: ScanNode, scan: PreparedScan, estimate: MotionEstimate
     ) -> tuple[PreparedScan, MotionEstimate]:
         """`scan` (de-skewed at constant velocity) and its estimate, or the scan de-skewed with
         the yaw-rate trend and its registration (seeded with the first) when that correlates
@@ -544,7 +545,7 @@ class Odometry:
         motion = between(previous.pose, pose)
         sigma_yaw = np.deg2rad(qcfg.gap_sigma_yaw_deg)
         covariance = np.diag([qcfg.gap_sigma_xy_m**2, qcfg.gap_sigma_xy_m**2, sigma_yaw**2])
-        node = _ScanNode(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
+        node = ScanNode(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
         state.previous = node  # the keyframe stays: the next scan tries it first
         keyframe = state.keyframe
         assert keyframe is not None
@@ -563,11 +564,11 @@ class Odometry:
 
     def _record(
         self,
-        node: _ScanNode,
+        node: ScanNode,
         *,
         motion: FloatArray,
         covariance: FloatArray,
-        reference: _ScanNode,
+        reference: ScanNode,
         reference_motion: FloatArray,
         is_keyframe: bool,
         ok: bool,

@@ -16,9 +16,11 @@ import pytest
 from numpy.typing import NDArray
 
 from odometry import Odometry, OdometryResult
+from odometry.config import QualityConfig
 from odometry.deskew import motion_from_twist
 from odometry.history import ResultHistory
 from odometry.reference_time import interpolated_twist, pose_at_reference
+from odometry.uncertainty import RevisionTerms, revised_conversion_covariance
 from odometry.velocity import Velocity
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
@@ -89,7 +91,12 @@ def test_prompt_and_revised_results_each_chain(
     np.testing.assert_array_equal(history[-1].pose, prompt[-1].pose)
     moved = [np.hypot(*(h.pose - p.pose)[:2]) for h, p in zip(history, prompt, strict=True)]
     assert 0.0 < max(moved) < 1.0
-    assert [r.covariance.tolist() for r in history] == [r.covariance.tolist() for r in prompt]
+    for h in history[1:]:
+        assert np.allclose(h.covariance, h.covariance.T) and np.linalg.eigvalsh(h.covariance)[0] > 0
+    # The revision recomputes the covariance of the move to the reference time.
+    pairs = zip(history, prompt, strict=True)
+    assert any(not np.allclose(h.covariance, p.covariance) for h, p in pairs)
+    np.testing.assert_array_equal(history[-1].covariance, prompt[-1].covariance)
 
 
 def test_interpolated_twist_is_linear_between_the_measurements() -> None:
@@ -126,3 +133,22 @@ def test_only_the_last_scan_is_revised() -> None:
     for index in (0, 1):
         with pytest.raises(ValueError, match="only the last scan"):
             history.revise(index, np.zeros(3))
+
+
+def test_revised_conversion_covariance_lags_only_a_change_of_the_change() -> None:
+    """Interpolating across the scan follows a steady change of velocity (braking at a constant
+    rate): only the velocity's registration noise is left, half the prompt's. A yaw-rate
+    reversal (the change flips sign) adds `revised_velocity_lag_fraction` of the flip."""
+    registration = np.diag([1e-4, 4e-4, 1e-6])
+    change = np.array([-0.75, 0.0, 0.2])
+    terms = RevisionTerms(np.zeros((3, 3)), 0.0, registration, -0.125, 0.25, change)
+    quality = QualityConfig(revised_velocity_lag_fraction=0.25)
+    steady = revised_conversion_covariance(terms, change, quality)
+    np.testing.assert_allclose(steady, 0.125**2 * registration / 0.25**2, atol=1e-15)
+    flipped = revised_conversion_covariance(terms, -change, quality)
+    lag = 0.25 * 2 * change
+    np.testing.assert_allclose(flipped - steady, np.diag(0.125**2 * lag**2), atol=1e-15)
+    at_image_time = RevisionTerms(np.zeros((3, 3)), 0.0, registration, 0.0, 0.25, change)
+    np.testing.assert_array_equal(
+        revised_conversion_covariance(at_image_time, -change, quality), np.zeros((3, 3))
+    )

@@ -1,0 +1,50 @@
+"""The odometry's working state: one node per scan it placed, and what it carries from scan to
+scan (keyframes, velocity, history). Used by `odometry.Odometry` only."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry.history import ResultHistory
+from odometry.registration import PreparedScan
+from odometry.uncertainty import RevisionTerms
+from odometry.velocity import Velocity
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class ScanNode:
+    """A scan: its pose at its reference time and the pose of its image frame (`image_pose`,
+    world frame; see `PreparedScan`), which the registrations chain. A gap's (`gap`) poses are
+    the constant-velocity prediction."""
+
+    index: int
+    pose: FloatArray
+    image_pose: FloatArray
+    scan: PreparedScan
+    frames: int = 0
+    gap: bool = False
+    conversion_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
+    """Covariance (own axes) that moving the image pose to the reference time adds to `pose`."""
+    revision: RevisionTerms | None = None  # to recompute its factor covariance when revised
+    revised_conversion: FloatArray | None = None  # `conversion_covariance` once revised
+
+    @property
+    def settled_conversion(self) -> FloatArray:
+        """The conversion covariance, revised once the pose has been."""
+        revised = self.revised_conversion
+        return self.conversion_covariance if revised is None else revised
+
+
+@dataclass
+class OdometryState:
+    keyframe: ScanNode | None = None
+    previous: ScanNode | None = None  # the previous scan (same fields as a keyframe)
+    last_registered: ScanNode | None = None  # the last scan that was not a gap
+    earlier_keyframes: list[ScanNode] = field(default_factory=list)  # most recent first
+    velocity: Velocity | None = None
+    history: ResultHistory = field(default_factory=ResultHistory)

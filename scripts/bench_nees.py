@@ -2,13 +2,13 @@
 
 Runs the SLAM pipeline (`radar_slam.pipeline.Pipeline`, the same as `radar-slam run`) on each
 sequence at each stride and compares, factor by factor, what the graph was given with the ground
-truth (`radar_slam.evaluation.nees`): the odometry factors (the *prompt* results of
-`Odometry.register`, as the pipeline adds them; gaps counted apart) and the accepted loop
-factors. Prints per factor type the mean NEES (3 when calibrated), its median (2.37), the share
-above the 99 % quantile (11.34) and the per-axis normalised squared errors (1 when calibrated),
-split by driving: odometry factors on straight and turning steps (true yaw rate above
-`--turn-dps`), loops with the two scans facing the same or opposite ways. Also the SLAM ATE and
-the loops accepted / true of the run, so one run shows both.
+truth (`radar_slam.evaluation.nees`): the odometry factors (the results of `Odometry.register`
+revised once the next scan registered, as the pipeline adds them; gaps counted apart) and the
+accepted loop factors. Prints per factor type the mean NEES (3 when calibrated), its median
+(2.37), the share above the 99 % quantile (11.34) and the per-axis normalised squared errors (1
+when calibrated), split by driving: odometry factors on straight and turning steps (true yaw
+rate above `--turn-dps`), loops with the two scans facing the same or opposite ways. Also the
+SLAM ATE and the loops accepted / true of the run, so one run shows both.
 
 Usage: python scripts/bench_nees.py [SEQ ...] [--data-root ROOT] [--stride 1 4]
        [--config FILE.yaml] [--set section.key=value ...] [--json OUT]
@@ -80,7 +80,7 @@ def summarise(label: str, items: list[FactorNees]) -> Group:
 
 
 def odometry_groups(results: Results, truth: NDArray[np.float64], turn_dps: float) -> list[Group]:
-    """The prompt odometry factors (as added to the graph): all, straight, turning."""
+    """The odometry factors (revised, as added to the graph): all, straight, turning."""
     straight: list[FactorNees] = []
     turning: list[FactorNees] = []
     stamps = np.array([r.timestamp_ns for r in results.odometry_results], dtype=np.float64)

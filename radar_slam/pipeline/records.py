@@ -91,7 +91,7 @@ class Results:
         slam: optimised trajectory, one pose per scan, same timestamps.
         ground_truth: ground truth at the scans with a known pose (NaN rows dropped), or None.
         ground_truth_poses: (frames, 3) ground truth per scan with NaN rows, or None.
-        odometry_results: the odometry's per-scan results.
+        odometry_results: the odometry's per-scan results, revised (the graph's odometry factors).
         loops: every verified loop proposal with its final status and reason.
         true_loops: per loop, whether it is true (`evaluation.truth.is_true_loop`), None without GT.
         graph: the final pose graph (estimates = slam).

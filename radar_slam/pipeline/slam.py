@@ -110,7 +110,6 @@ class Pipeline:
         )
         self.graph = PoseGraph(self.config.graph)
         self.timer = StepTimer()
-        self._results: list[OdometryResult] = []
         self._loop_ids: dict[tuple[int, int], int] = {}  # (query, match) -> graph loop id
         self._loops_pending = False  # loops added to the graph since its last ISAM2 update
         self._loops_correct = False  # ... one of which disagrees with the current estimate
@@ -136,8 +135,8 @@ class Pipeline:
             for index in range(self.frames):
                 frame = self._read(reader)
                 result = self._track(frame)
-                self._extend_graph(result)
                 if held is not None:
+                    self._extend_graph(self.odometry.result(index - 1))
                     self._submit(*held, index - 1)
                 held = (frame, self.odometry.prepared)  # 15V: its conditioned scan
                 self._close_loops(self.loops.due(index), index)
@@ -145,6 +144,7 @@ class Pipeline:
                 if self.observer is not None:
                     self.observer.on_scan(self, frame, result)
             if held is not None:
+                self._extend_graph(self.odometry.result(self.frames - 1))
                 self._submit(*held, self.frames - 1)
             self._close_loops(self.loops.finish(), None)
         finally:
@@ -168,9 +168,7 @@ class Pipeline:
 
     def _track(self, frame: RadarFrame) -> OdometryResult:
         with self.timer("odometry"):
-            result = self.odometry.register(frame)
-        self._results.append(result)
-        return result
+            return self.odometry.register(frame)
 
     def _submit(self, frame: RadarFrame, prepared: PreparedScan | None, index: int) -> None:
         """Hand scan `index` to the loop detector once the next scan has registered, with its
@@ -179,6 +177,9 @@ class Pipeline:
         self.loops.submit(frame, self.odometry.result(index).pose, index, prepared)
 
     def _extend_graph(self, result: OdometryResult) -> None:
+        """Add a scan to the graph once the next scan has registered, with its revised pose (its
+        motion from the previous revised pose): the prompt pose of a scan swept across a
+        yaw-rate step can be off by degrees (the last scan: its prompt pose)."""
         with self.timer("graph"):
             if result.index == 0:
                 self.graph.add_keyframe(0, result.pose)
@@ -229,8 +230,9 @@ class Pipeline:
 
     def _evaluate(self, seconds: float) -> Results:
         with self.timer("evaluation"):
-            stamps = np.array([r.timestamp_ns for r in self._results], dtype=np.int64)
-            odometry = Trajectory(stamps, np.array([r.pose for r in self._results]))
+            revised = self.odometry.results
+            stamps = np.array([r.timestamp_ns for r in revised], dtype=np.int64)
+            odometry = Trajectory(stamps, np.array([r.pose for r in revised]))
             slam = Trajectory(stamps, self.graph.estimates())
             gt_poses, gt = ground_truth_of(self.sequence, self.frames)
             loops = self.loop_detector.decisions
@@ -245,7 +247,7 @@ class Pipeline:
         metrics = summarise(
             frames=self.frames,
             seconds=seconds,
-            gaps=sum(r.gap for r in self._results),
+            gaps=sum(r.gap for r in revised),
             candidates=self.loop_detector.proposed,
             loops=loops,
             true_loops=true_loops,
@@ -259,7 +261,7 @@ class Pipeline:
             slam=slam,
             ground_truth=gt,
             ground_truth_poses=gt_poses,
-            odometry_results=list(self._results),
+            odometry_results=revised,
             loops=loops,
             true_loops=true_loops,
             graph=self.graph,

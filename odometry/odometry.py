@@ -330,34 +330,8 @@ class Odometry:
                 estimate.covariance, change, scan.image_time_s, interval_s, self.config.quality
             ),
         )
-        registration_covariance = estimate.covariance + unseen_covariance(
-            estimate.motion, change, scan, self.config.quality
-        )
-        turn = float(between(previous.pose, reference.pose)[2])
-        covariance, fixed = (
-            rotate_covariance(
-                factor_covariance(
-                    registration_covariance,
-                    reference.pose,
-                    reference.image_pose,
-                    reference_conversion,
-                    node.pose,
-                    conversion,
-                ),
-                turn,
-            )
-            for reference_conversion, conversion in (
-                (reference.conversion_covariance, node.conversion_covariance),
-                (reference.settled_conversion, np.zeros((3, 3))),
-            )
-        )
-        node.revision = RevisionTerms(
-            fixed=fixed,
-            conversion_angle=float(between(previous.pose, pose)[2]),
-            registration_covariance=estimate.covariance,
-            image_time_s=scan.image_time_s,
-            interval_s=interval_s,
-            velocity_change=change,
+        covariance = self._factor_covariance(
+            previous, reference, node, estimate, change, interval_s
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
@@ -381,6 +355,46 @@ class Odometry:
             ok=True,
             quality=estimate.quality,
         )
+
+    def _factor_covariance(
+        self,
+        previous: ScanNode,
+        reference: ScanNode,
+        node: ScanNode,
+        estimate: MotionEstimate,
+        change: FloatArray,
+        interval_s: float,
+    ) -> FloatArray:
+        """The covariance of `node`'s result (in `previous`'s axes); keeps on the node what its
+        revision will need (`node.revision`)."""
+        registration_covariance = estimate.covariance + unseen_covariance(
+            estimate.motion, change, node.scan, self.config.quality
+        )
+        turn = float(between(previous.pose, reference.pose)[2])
+
+        def in_previous_axes(reference_conversion: FloatArray, own: FloatArray) -> FloatArray:
+            return rotate_covariance(
+                factor_covariance(
+                    registration_covariance,
+                    reference.pose,
+                    reference.image_pose,
+                    reference_conversion,
+                    node.pose,
+                    own,
+                ),
+                turn,
+            )
+
+        node.revision = RevisionTerms(
+            # What the revision keeps: all but the scan's own conversion (`_revise` adds it).
+            fixed=in_previous_axes(reference.settled_conversion, np.zeros((3, 3))),
+            conversion_angle=float(between(previous.pose, node.pose)[2]),
+            registration_covariance=estimate.covariance,
+            image_time_s=node.scan.image_time_s,
+            interval_s=interval_s,
+            velocity_change=change,
+        )
+        return in_previous_axes(reference.conversion_covariance, node.conversion_covariance)
 
     def _redeskewed(
         self,

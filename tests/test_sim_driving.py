@@ -219,9 +219,11 @@ def test_held_out_scenarios_are_marked() -> None:
         "heldout_town",
         "heldout_mixed",
         "heldout_junctions",
+        "heldout_revisits",
         "tiny_heldout_town",
         "tiny_heldout_mixed",
         "tiny_heldout_junctions",
+        "tiny_heldout_revisits",
     }
     for name in ("tiny", "tiny_loop", "loop", "reverse", "multisession_a", "long"):
         assert not SCENARIOS[name].held_out
@@ -250,3 +252,12 @@ def test_reduced_bin_version_generates_and_loads_with_ground_truth(
     assert gt is not None and gt.shape == (4, 3)
     step = np.hypot(*np.diff(gt[:, :2], axis=0).T)
     assert np.all(step > 0.5) and np.all(step < URBAN_MAX_SPEED_MPS / 4)
+
+
+def test_held_out_revisits_drive_the_ring_back_the_other_way(scenes: dict[str, Drive]) -> None:
+    """`heldout_revisits`: after its U-turn, back along the street and round half the ring in
+    the other direction, in the other lane (the reverse-direction revisits the held-out set
+    lacked; the last 40 % of the drive meets its first 40 % the other way for about 250 m)."""
+    lateral, length_m = returns_along_the_outbound_street(scenes["heldout_revisits"])
+    assert length_m > 200.0
+    assert LANE_BAND_M[0] <= np.median(lateral) <= LANE_BAND_M[1]

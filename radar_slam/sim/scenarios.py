@@ -20,8 +20,9 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 Driving scenarios (`DRIVING_SCENARIOS`, each also as `tiny_<name>` at 1024 bins for CI):
 turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear,
 roundabouts (six in a row, a tuning scenario for yaw-rate reversals), and the held-out
-heldout_town, heldout_mixed and heldout_junctions (`HELD_OUT`: benchmarks report them separately and
-nobody tunes on them). All but turn_around drive a plan (manoeuvres.py) with stepped curvature.
+heldout_town, heldout_mixed, heldout_junctions and heldout_revisits (`HELD_OUT`: benchmarks
+report them separately and nobody tunes on them). All but turn_around drive a plan
+(manoeuvres.py) with stepped curvature.
 """
 
 from __future__ import annotations
@@ -414,6 +415,21 @@ _HELD_OUT_MIXED_ROUTE: Waypoints = (
     (1, 3),
     (1, 2),
 )
+_HELD_OUT_REVISITS_ROUTE: Waypoints = (
+    (0, 1),
+    (2, 1),
+    (2, 3),
+    (0, 3),
+    (0, 1),
+    (2, 1),
+    (3, 1),
+    (2, 1),
+    (0, 1),
+    (0, 3),
+    (2, 3),
+)
+"""Round a ring of blocks, on past its start, a U-turn, and back round the ring the other way
+(issue 10's fourth held-out drive, added at stop 14: revisits in both directions)."""
 _CI = " Reduced bins (1024, 61 m) for CI."
 _URBAN_SMOOTH = DrivingConfig(min_speed_mps=3.0, cruise_speed_mps=(9.0, 13.5))
 """The smooth lattice drive at urban speeds (<= 14 m/s), slowing for tight corners."""
@@ -563,6 +579,21 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
                 Stop(12, 8.0),
             ),
             driving=PlanDrivingConfig(accel_mps2=2.5, cruise_speed_mps=(10.0, 13.0)),
+        ),
+        held_out=True,
+    ),
+    Scenario(
+        name="heldout_revisits",
+        description="HELD OUT: round a ring of blocks in a fourth town, a U-turn, and back round "
+        "it the other way; two stops",
+        seed=44,
+        waypoints=_HELD_OUT_REVISITS_ROUTE,
+        town_routes=(_HELD_OUT_REVISITS_ROUTE,),
+        start_ns=EPOCH_NS + 18 * DAY_NS,
+        town=_plan_town(n_blocks=(4, 4), block_size_m=(60.0, 100.0), **_WIDE_STREETS),
+        plan=DrivePlan(
+            events=(Stop(3, 8.0), TurnAround(11, "u_turn", 40.0), Stop(15, 6.0)),
+            driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(12.0, 14.0)),
         ),
         held_out=True,
     ),

@@ -94,8 +94,8 @@ class RotationConfig:
             first. The first coarse translation is made at the Fourier-Mellin yaw, which locks
             toward zero for rotations below about a degree; its error leaks into a single
             refinement as a rotation error proportional to the rotation (see
-            `scripts/diagnose_rotation_bias.py`). 2 removes that error, but the drives get no
-            better with it (docs/odometry_notes.md, issue 10b), so 1 stays the default.
+            `scripts/diagnose_rotation_bias.py`). 2 removes that error (the default since
+            stop 14, when the drives began to gain from it: docs/odometry_notes.md).
         refine_repeat_min_deg: the refinement is repeated only while its last correction was
             larger than this [deg] (the translation was made at a yaw off by that much).
     """
@@ -112,7 +112,7 @@ class RotationConfig:
     refine_max_range_m: float = 80.0
     refine_range_step_m: float = 0.5
     refine_smoothing_bins: float = 2.0
-    refine_passes: int = 1
+    refine_passes: int = 2
     refine_repeat_min_deg: float = 0.05
 
     def __post_init__(self) -> None:

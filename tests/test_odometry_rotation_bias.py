@@ -5,8 +5,7 @@ few per cent of them), so the coarse translation was made at a yaw off by nearly
 rotation; its error leaked into the rotation refinement as a yaw error of about -3.7 % of the
 rotation at a 10 m baseline (-34 mdeg mean for 0.9 deg, up to -73). With the translation
 re-estimated at the refined yaw and the rotation refined again (`RotationConfig.refine_passes`
-2; the default stays 1, see docs/odometry_notes.md, issue 10b) the error no longer follows the
-rotation.
+2, the default since stop 14; docs/odometry_notes.md) the error no longer follows the rotation.
 """
 
 from __future__ import annotations
@@ -30,7 +29,7 @@ MAX_STILL_ERROR_MDEG = 1.0
 
 
 def _cfg(passes: int | None = None) -> OdometryConfig:
-    """Without de-skew; `passes` refinements (None: the default config's)."""
+    """Without de-skew; `passes` refinements (None: the default config's, 2)."""
     cfg = OdometryConfig(deskew=DeskewConfig(enabled=False))
     if passes is None:
         return cfg
@@ -63,9 +62,14 @@ def test_sub_degree_rotation_with_translation_is_unbiased(rotation_mdeg: float) 
 
 
 def test_single_refinement_pass_loses_part_of_the_rotation() -> None:
-    """The default (one pass) keeps the failure the second pass removes: > 2 % of 0.9 deg."""
-    errors = _yaw_errors_mdeg((10.0, 0.0), 900.0, _cfg())
+    """One pass keeps the failure the second pass removes: > 2 % of 0.9 deg."""
+    errors = _yaw_errors_mdeg((10.0, 0.0), 900.0, _cfg(passes=1))
     assert errors.mean() < -0.02 * 900.0, errors
+
+
+def test_default_refines_twice() -> None:
+    errors = _yaw_errors_mdeg((10.0, 0.0), 900.0, _cfg())
+    assert abs(errors.mean() / 900.0) < MAX_MEAN_RELATIVE_ERROR, errors
 
 
 @pytest.mark.parametrize("rotation_mdeg", [225.0, 900.0])

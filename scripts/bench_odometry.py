@@ -337,9 +337,9 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     cv2.setNumThreads(1)  # one core; numpy's FFT is single-threaded already
+    config = None if args.config is None else load_config(None, args.config).odometry
     if args.sequence or args.held_out:
         specs = [(spec, False) for spec in args.sequence] + [(s, True) for s in args.held_out]
-        config = None if args.config is None else load_config(None, args.config).odometry
         rows = [
             bench_sequence(
                 spec, args.data_root, args.max_frames, args.plot_dir, stride, held, config

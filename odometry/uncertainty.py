@@ -1,8 +1,9 @@
 """Covariance terms of the odometry that a registration's correlation peak does not show.
 
 Pure functions used by `odometry.Odometry`: the error of moving a scan's mid-sweep image pose to
-its reference time with a measured velocity, and the registration errors that grow with the
-turn and with a de-skew velocity that lags the vehicle's (`QualityConfig`).
+its reference time with a measured velocity (and again once the pose is revised with the
+velocity interpolated across the scan: `RevisionTerms`), and the registration errors that grow
+with the turn and with a de-skew velocity that lags the vehicle's (`QualityConfig`).
 """
 
 from __future__ import annotations

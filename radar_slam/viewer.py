@@ -9,7 +9,8 @@ timestamp):
 
     radar/scan              the scan as a Cartesian image in the vehicle frame (+x forward up,
                             +y left to the left), 512 x 512, JPEG
-    world/odometry          odometry trajectory so far (LineStrips2D, metres)
+    world/odometry          odometry trajectory so far (LineStrips2D, metres; each pose revised
+                            once the next scan has registered, as the pose graph takes it)
     world/gt                ground truth so far, moved so its first pose is the odometry's first
     world/slam              the optimised trajectory, re-logged whenever loops are accepted
     world/pose              the current odometry pose (Points2D)
@@ -119,6 +120,8 @@ class RerunViewer:
     def on_scan(self, pipeline: Pipeline, frame: RadarFrame, result: OdometryResult) -> None:
         self._set_time(result.index, frame.timestamp_ns)
         self._log_image(frame)
+        if self._odometry:  # the previous scan's pose is revised now (as the graph takes it)
+            self._odometry[-1] = pipeline.odometry.result(result.index - 1).pose
         self._odometry.append(np.asarray(result.pose, dtype=np.float64))
         if result.is_keyframe:
             self._keyframes.append(self._odometry[-1])

@@ -18,7 +18,9 @@ class PipelineObserver(Protocol):
     """Called by `Pipeline.run` after each scan and once with the final results."""
 
     def on_scan(self, pipeline: Pipeline, frame: RadarFrame, result: OdometryResult) -> None:
-        """A scan was tracked, added to the graph and offered to the loop detector."""
+        """A scan was tracked (`result`: its prompt result); the scan before it has now been
+        revised (`pipeline.odometry.result`), added to the graph and offered to the loop
+        detector."""
 
     def on_finish(self, results: Results) -> None:
         """The run finished (final optimisation and evaluation done)."""

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from radar_slam.cli import app
 from radar_slam.datasets.frame import Sequence
-from radar_slam.datasets.stride import StridedSequence, strided
+from radar_slam.datasets.stride import ScanSelection, StridedSequence, strided
 from radar_slam.errors import RadarSlamError
 
 
@@ -31,6 +31,21 @@ def test_strided_view_keeps_every_kth_scan(tiny: Sequence, stride: int) -> None:
         np.testing.assert_array_equal(frame.polar, source.polar)
     with pytest.raises(IndexError):
         view[len(view)]
+
+
+def test_selection_keeps_the_chosen_scans(tiny: Sequence) -> None:
+    """Any increasing scans (e.g. a recording with dropped scans)."""
+    keep = np.array([0, 1, 5, 6, 30])
+    view = ScanSelection(tiny, keep, "tiny_dropped")
+    assert isinstance(view, Sequence) and len(view) == 5 and view.name == "tiny_dropped"
+    np.testing.assert_array_equal(view.timestamps_ns, tiny.timestamps_ns[keep])
+    gt = tiny.ground_truth
+    assert gt is not None and view.ground_truth is not None
+    np.testing.assert_array_equal(view.ground_truth, gt[keep])
+    assert view[-1].timestamp_ns == tiny[30].timestamp_ns
+    assert view[2].timestamp_ns == tiny[5].timestamp_ns
+    with pytest.raises(IndexError):
+        view[5]
 
 
 def test_stride_one_is_the_sequence_and_zero_is_an_error(tiny: Sequence) -> None:

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from odometry import Odometry
 from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import RadarFrame, RadarSequence
+from radar_slam.datasets.stride import ScanSelection
 from radar_slam.evaluation.metrics import kitti_drift
 from radar_slam.trajectory import Trajectory
 from raplace import se2
@@ -23,29 +23,6 @@ DROPPED = 4
 TURNING_DPS = 20.0
 MAX_DRIFT_PCT = 1.0
 """KITTI drift bar with the scans dropped (measured 0.41 %; 0.52 % with every scan)."""
-
-
-class Subset:
-    """The scans `keep` (indices, increasing) of a sequence, as a `RadarSequence`."""
-
-    def __init__(self, base: RadarSequence, keep: NDArray[np.int64]) -> None:
-        self.base, self.keep = base, keep
-        self.family, self.name = base.family, f"{base.name}_dropped"
-
-    def __len__(self) -> int:
-        return len(self.keep)
-
-    def __getitem__(self, index: int) -> RadarFrame:
-        return self.base[int(self.keep[index])]
-
-    @property
-    def timestamps_ns(self) -> NDArray[np.int64]:
-        return np.asarray(self.base.timestamps_ns)[self.keep]
-
-    @property
-    def ground_truth(self) -> NDArray[np.float64] | None:
-        truth = self.base.ground_truth
-        return None if truth is None else truth[self.keep]
 
 
 def turn_middles(truth: NDArray[np.float64], stamps_ns: NDArray[np.int64]) -> list[int]:
@@ -66,7 +43,7 @@ def test_scans_dropped_mid_turn_register_without_gaps(synthetic_root: Path) -> N
     keep = np.ones(len(base), dtype=bool)
     for middle in middles:
         keep[middle - DROPPED // 2 : middle + DROPPED - DROPPED // 2] = False
-    sequence = Subset(base, np.flatnonzero(keep))
+    sequence = ScanSelection(base, np.flatnonzero(keep), "tiny_junction_turns_dropped")
     kept_truth = sequence.ground_truth
     assert kept_truth is not None
     jumps = np.abs(np.rad2deg(se2.between(kept_truth[:-1], kept_truth[1:])[:, 2]))

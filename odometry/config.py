@@ -317,6 +317,11 @@ class DeskewConfig:
             yaw-rate trend and the kept de-skew disagree (by more than the re-de-skew limits).
         yaw_rate_search_min_gain: a searched de-skew replaces the kept one only when its peak
             quality is higher by more than this fraction.
+        yaw_rate_search_weak_fraction: the search also runs, at any interval, on a registration
+            whose peak quality is below this fraction of the previous scan's (a de-skew far off,
+            e.g. through a yaw-rate reversal between two scans; 0: never).
+        yaw_rate_search_weak_rounds: rounds of search for such a weak registration, each around
+            the yaw rate the last one moved to (the vertex of one round reaches three half-widths).
     """
 
     enabled: bool = True
@@ -327,6 +332,8 @@ class DeskewConfig:
     yaw_rate_search_dps: float = 16.0
     yaw_rate_search_min_interval_s: float = 0.75
     yaw_rate_search_min_gain: float = 0.05
+    yaw_rate_search_weak_fraction: float = 0.5
+    yaw_rate_search_weak_rounds: int = 3
 
     def __post_init__(self) -> None:
         checks.at_least("iterations", self.iterations, 0)
@@ -334,6 +341,10 @@ class DeskewConfig:
         checks.in_range("yaw_rate_search_dps", self.yaw_rate_search_dps, 0.0, 90.0)
         checks.non_negative("yaw_rate_search_min_interval_s", self.yaw_rate_search_min_interval_s)
         checks.non_negative("yaw_rate_search_min_gain", self.yaw_rate_search_min_gain)
+        checks.in_range(
+            "yaw_rate_search_weak_fraction", self.yaw_rate_search_weak_fraction, 0.0, 1.0
+        )
+        checks.at_least("yaw_rate_search_weak_rounds", self.yaw_rate_search_weak_rounds, 1)
 
 
 def _coarse() -> LevelConfig:

@@ -424,13 +424,15 @@ class Odometry:
         self, reference: ScanNode, scan: PreparedScan, estimate: MotionEstimate, interval_s: float
     ) -> tuple[PreparedScan, MotionEstimate]:
         """`scan` and its estimate, or the scan de-skewed at a yaw rate searched by peak quality
-        where the search is wanted (`rate_search`: low frame rates)."""
+        where the search is wanted (`rate_search.rounds_wanted`: low frame rates, weak peaks)."""
         if self._state.velocity is None:
             return scan, estimate
         trend, cfg = self._velocity_at(image_time_ns(scan)), self.config
-        if not rate_search.wanted(scan, estimate, trend, interval_s, cfg):
+        last = self._state.history[len(self._state.history) - 1].quality
+        rounds = rate_search.rounds_wanted(scan, estimate, trend, interval_s, last, cfg)
+        if rounds == 0:
             return scan, estimate
-        return rate_search.searched(reference.scan, scan, estimate, cfg, register_images)
+        return rate_search.searched(reference.scan, scan, estimate, cfg, register_images, rounds)
 
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(

@@ -1,4 +1,4 @@
-"""A new scan's de-skew yaw rate searched by correlation peak quality (low frame rates).
+"""A new scan's de-skew yaw rate searched by correlation peak quality (low frame rates, weak peaks).
 
 At 1 Hz the velocity a scan is de-skewed with is the mean over the second before it; through a
 yaw-rate step or reversal the sweep's own yaw rate can be tens of deg/s away. Rendered at a range
@@ -8,7 +8,10 @@ reference's de-skew* (its error follows the reference's de-skew error), not the 
 images distorted alike register to a better relative motion than one distorted and one right
 (docs/odometry_notes.md, issue 10y), which is what this search buys. It runs only where it can
 matter: a long interval between the image frames and a yaw-rate trend that disagrees with the kept
-de-skew (`DeskewConfig.yaw_rate_search_*`).
+de-skew, or a registration whose peak is far weaker than the previous scan's. The second is how a
+de-skew far off shows at any rate: at 2 Hz, leaving a U-turn through a reversal from +30 to -30
+deg/s, the scan de-skewed at +28 deg/s correlated at a quarter of the previous peak and took an
+8 deg wrong turn; searched, it registers within a degree (`DeskewConfig.yaw_rate_search_*`).
 """
 
 from __future__ import annotations
@@ -31,25 +34,31 @@ MIN_VERTEX_OFFSET = 0.25
 """... and only when it is at least this many half-widths from every point already tried."""
 
 
-def wanted(
+def rounds_wanted(
     scan: PreparedScan,
     estimate: MotionEstimate,
     trend: FloatArray,
     interval_s: float,
+    last_quality: float,
     cfg: OdometryConfig,
-) -> bool:
-    """Whether to search `scan`'s de-skew yaw rate: the search is on, the scan is de-skewed and
-    registered (`estimate`), its image frame is `interval_s` [s] after the last one (at least
-    the configured interval), and the twist with the yaw-rate trend (`trend`, (3,)) is off the
-    kept de-skew by more than the re-de-skew limits."""
+) -> int:
+    """How many rounds of search `scan`'s de-skew yaw rate gets (0: none). Only a de-skewed,
+    registered scan (`estimate`) is searched, and only while the search is on:
+
+    - its peak is weak, below `DeskewConfig.yaw_rate_search_weak_fraction` of the previous
+      scan's (`last_quality`; a de-skew far off, at any frame rate):
+      `yaw_rate_search_weak_rounds` rounds;
+    - its image frame is `interval_s` [s] after the last one, at least
+      `yaw_rate_search_min_interval_s`, and the twist with the yaw-rate trend (`trend`, (3,))
+      is off the kept de-skew by more than the re-de-skew limits: one round.
+    """
     dcfg = cfg.deskew
-    return (
-        dcfg.yaw_rate_search_dps > 0.0
-        and scan.twist is not None
-        and estimate.ok
-        and interval_s >= dcfg.yaw_rate_search_min_interval_s
-        and not close_twists(trend, scan.twist, REDESKEW_MPS, REDESKEW_RADPS)
-    )
+    if dcfg.yaw_rate_search_dps <= 0.0 or scan.twist is None or not estimate.ok:
+        return 0
+    if estimate.quality < dcfg.yaw_rate_search_weak_fraction * last_quality:
+        return dcfg.yaw_rate_search_weak_rounds
+    slow = interval_s >= dcfg.yaw_rate_search_min_interval_s
+    return int(slow and not close_twists(trend, scan.twist, REDESKEW_MPS, REDESKEW_RADPS))
 
 
 def vertex_offset(qualities: tuple[float, float, float]) -> float | None:
@@ -72,11 +81,34 @@ def searched(
     estimate: MotionEstimate,
     cfg: OdometryConfig,
     register: Register,
+    rounds: int = 1,
 ) -> tuple[PreparedScan, MotionEstimate]:
     """`scan` and its registration against `reference`, or the scan de-skewed at a searched yaw
     rate and its registration (seeded with `estimate`) when that correlates more strongly by
-    more than `DeskewConfig.yaw_rate_search_min_gain`. It costs 2-3 registrations; the caller
-    decides whether to search (`wanted`)."""
+    more than `DeskewConfig.yaw_rate_search_min_gain`. Each of up to `rounds` rounds costs 2-3
+    registrations and searches around the yaw rate the last one moved to (it stops where one
+    does not move). The caller decides whether and how long to search (`rounds_wanted`)."""
+    found_scan, found = scan, estimate
+    for _ in range(rounds):
+        better = _search_round(reference, found_scan, found, cfg, register)
+        if better[0] is found_scan:
+            break
+        found_scan, found = better
+    gain = cfg.deskew.yaw_rate_search_min_gain
+    if found.quality <= (1.0 + gain) * estimate.quality:
+        return scan, estimate
+    return found_scan, found
+
+
+def _search_round(
+    reference: PreparedScan,
+    scan: PreparedScan,
+    estimate: MotionEstimate,
+    cfg: OdometryConfig,
+    register: Register,
+) -> tuple[PreparedScan, MotionEstimate]:
+    """The strongest of `scan` and the scan de-skewed at its yaw rate -+ the half-width and at
+    the vertex of the parabola through their peak qualities."""
     assert scan.twist is not None
     step = np.deg2rad(cfg.deskew.yaw_rate_search_dps)
     base_twist = scan.twist
@@ -92,10 +124,6 @@ def searched(
     offset = vertex_offset((qualities[0], qualities[1], qualities[2]))
     if offset is not None:
         candidates.append(tried(offset))
-    best = max(
+    return max(
         (c for c in candidates if c[1].ok), key=lambda c: c[1].quality, default=(scan, estimate)
     )
-    gain = cfg.deskew.yaw_rate_search_min_gain
-    if best[1].quality <= (1.0 + gain) * estimate.quality:
-        return scan, estimate
-    return best

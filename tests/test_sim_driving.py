@@ -29,6 +29,9 @@ from radar_slam.sim.town import BUILDING, Town
 from raplace import se2
 
 URBAN_MAX_SPEED_MPS = 14.0
+ARTERIAL_MAX_SPEED_MPS = 20.0
+FAST_SCENARIOS = ("heldout_fast",)
+"""Driven at arterial speeds (up to `ARTERIAL_MAX_SPEED_MPS`); every other one is urban."""
 MAX_ACCEL_MPS2 = 3.0
 ACCEL_TOLERANCE_MPS2 = 0.05
 MAX_YAW_RATE = 0.8  # rad/s: 5 m/s on a 6 m radius
@@ -99,7 +102,10 @@ def test_legs_known_answers() -> None:
 def test_driving_is_physically_plausible_and_short(scenes: dict[str, Drive], name: str) -> None:
     scene = scenes[name]
     t, poses, forward = kinematics(scene)
-    assert np.abs(forward).max() <= URBAN_MAX_SPEED_MPS
+    fast = name in FAST_SCENARIOS
+    assert np.abs(forward).max() <= (ARTERIAL_MAX_SPEED_MPS if fast else URBAN_MAX_SPEED_MPS)
+    if fast:
+        assert np.abs(forward).max() > 0.9 * ARTERIAL_MAX_SPEED_MPS
     every = int(round(ACCEL_WINDOW_S / np.diff(t[:2])[0]))
     accel = np.diff(forward[::every]) / ACCEL_WINDOW_S
     assert np.abs(accel).max() <= MAX_ACCEL_MPS2 + ACCEL_TOLERANCE_MPS2
@@ -220,10 +226,12 @@ def test_held_out_scenarios_are_marked() -> None:
         "heldout_mixed",
         "heldout_junctions",
         "heldout_revisits",
+        "heldout_fast",
         "tiny_heldout_town",
         "tiny_heldout_mixed",
         "tiny_heldout_junctions",
         "tiny_heldout_revisits",
+        "tiny_heldout_fast",
     }
     for name in ("tiny", "tiny_loop", "loop", "reverse", "multisession_a", "long"):
         assert not SCENARIOS[name].held_out
@@ -251,7 +259,8 @@ def test_reduced_bin_version_generates_and_loads_with_ground_truth(
     gt = sequence.ground_truth
     assert gt is not None and gt.shape == (4, 3)
     step = np.hypot(*np.diff(gt[:, :2], axis=0).T)
-    assert np.all(step > 0.5) and np.all(step < URBAN_MAX_SPEED_MPS / 4)
+    max_speed = ARTERIAL_MAX_SPEED_MPS if name in FAST_SCENARIOS else URBAN_MAX_SPEED_MPS
+    assert np.all(step > 0.5) and np.all(step < max_speed / 4)
 
 
 def test_held_out_revisits_drive_the_ring_back_the_other_way(scenes: dict[str, Drive]) -> None:

@@ -20,7 +20,7 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 Driving scenarios (`DRIVING_SCENARIOS`, each also as `tiny_<name>` at 1024 bins for CI):
 turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear,
 roundabouts (six in a row, a tuning scenario for yaw-rate reversals), and the held-out
-heldout_town, heldout_mixed, heldout_junctions and heldout_revisits (`HELD_OUT`: benchmarks
+heldout_town, heldout_mixed, heldout_junctions, heldout_revisits and heldout_fast (`HELD_OUT`: benchmarks
 report them separately and nobody tunes on them). All but turn_around drive a plan
 (manoeuvres.py) with stepped curvature.
 """
@@ -597,9 +597,24 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         ),
         held_out=True,
     ),
+    Scenario(
+        name="heldout_fast",
+        description="HELD OUT: heldout_town's route in a fifth town at arterial speeds (16-20 "
+        "m/s, up to 20 m between scans at 1 Hz)",
+        seed=51,
+        waypoints=_HELD_OUT_TOWN_ROUTE,
+        town_routes=(_HELD_OUT_TOWN_ROUTE,),
+        start_ns=EPOCH_NS + 19 * DAY_NS,
+        town=_plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
+        plan=DrivePlan(
+            events=(Stop(2, 10.0), Stop(8, 5.0), Stop(11, 10.0), TurnAround(12, "u_turn", 45.0)),
+            driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(16.0, 20.0)),
+        ),
+        held_out=True,
+    ),
 )
 """Scenarios of urban driving the smooth lattice drive lacks (issue 10): turning round, gear
-changes, roundabouts, stops, stepped curvature; and two held-out benchmark scenarios."""
+changes, roundabouts, stops, stepped curvature; and the held-out benchmark scenarios."""
 
 
 def reduced_bin_versions() -> list[Scenario]:

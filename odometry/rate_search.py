@@ -11,7 +11,7 @@ matter: a long interval between the image frames and a yaw-rate trend that disag
 de-skew, or a registration whose peak is far weaker than the previous scan's. The second is how a
 de-skew far off shows at any rate: at 2 Hz, leaving a U-turn through a reversal from +30 to -30
 deg/s, the scan de-skewed at +28 deg/s correlated at a quarter of the previous peak and took an
-8 deg wrong turn; searched, it registers within a degree (`DeskewConfig.yaw_rate_search_*`).
+8 deg wrong turn; searched, it registers within 1.5 deg (`DeskewConfig.yaw_rate_search_*`).
 """
 
 from __future__ import annotations

@@ -87,9 +87,10 @@ def test_rounds_wanted() -> None:
     far_trend = twist + np.array([0.0, 0.0, 0.5])
     assert wanted(50.0, 0.25, twist) == 0
     assert wanted(20.0, 0.25, twist) == cfg.deskew.yaw_rate_search_weak_rounds
+    assert wanted(20.0, 0.25, twist, yaw_rate_search_weak_rounds=3) == 3
     assert wanted(50.0, 1.0, twist) == 0
     assert wanted(50.0, 1.0, far_trend) == 1
-    assert wanted(20.0, 1.0, far_trend) == cfg.deskew.yaw_rate_search_weak_rounds
+    assert wanted(20.0, 1.0, far_trend, yaw_rate_search_weak_rounds=3) == 3
     assert wanted(20.0, 0.25, twist, yaw_rate_search_weak_fraction=0.0) == 0
     assert wanted(20.0, 1.0, far_trend, yaw_rate_search_dps=0.0) == 0
 

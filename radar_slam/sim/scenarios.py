@@ -20,8 +20,8 @@ scenario's group protected, so the two sessions of `multisession` share exactly 
 Driving scenarios (`DRIVING_SCENARIOS`, each also as `tiny_<name>` at 1024 bins for CI):
 turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, reverse_gear,
 roundabouts (six in a row, a tuning scenario for yaw-rate reversals), and the held-out
-heldout_town, heldout_mixed, heldout_junctions, heldout_revisits and heldout_fast (`HELD_OUT`: benchmarks
-report them separately and nobody tunes on them). All but turn_around drive a plan
+heldout_town, heldout_mixed, heldout_junctions, heldout_revisits and heldout_fast (`HELD_OUT`:
+benchmarks report them separately and nobody tunes on them). All but turn_around drive a plan
 (manoeuvres.py) with stepped curvature.
 """
 

@@ -372,29 +372,29 @@ class Odometry:
         )
         turn = float(between(previous.pose, reference.pose)[2])
 
-        def in_previous_axes(reference_conversion: FloatArray, own: FloatArray) -> FloatArray:
-            return rotate_covariance(
-                factor_covariance(
-                    registration_covariance,
-                    reference.pose,
-                    reference.image_pose,
-                    reference_conversion,
-                    node.pose,
-                    own,
-                ),
-                turn,
+        def in_previous_axes(previous_conversion: FloatArray, own: FloatArray) -> FloatArray:
+            # The factor joins the previous scan's pose, not the reference's: its conversion
+            # to the reference time is the one that enters (they differ after a keyframe).
+            registered = factor_covariance(
+                registration_covariance,
+                reference.pose,
+                reference.image_pose,
+                np.zeros((3, 3)),
+                node.pose,
+                own,
             )
+            return rotate_covariance(registered, turn) + previous_conversion
 
         node.revision = RevisionTerms(
             # What the revision keeps: all but the scan's own conversion (`_revise` adds it).
-            fixed=in_previous_axes(reference.settled_conversion, np.zeros((3, 3))),
+            fixed=in_previous_axes(previous.settled_conversion, np.zeros((3, 3))),
             conversion_angle=float(between(previous.pose, node.pose)[2]),
             registration_covariance=estimate.covariance,
             image_time_s=node.scan.image_time_s,
             interval_s=interval_s,
             velocity_change=change,
         )
-        return in_previous_axes(reference.conversion_covariance, node.conversion_covariance)
+        return in_previous_axes(previous.conversion_covariance, node.conversion_covariance)
 
     def _redeskewed(
         self,

@@ -75,7 +75,7 @@ from odometry.velocity import (
     bounded_twist,
     close_twists,
 )
-from raplace.se2 import between, compose, rotate_covariance
+from raplace.se2 import between, compose
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
@@ -373,17 +373,15 @@ class Odometry:
         turn = float(between(previous.pose, reference.pose)[2])
 
         def in_previous_axes(previous_conversion: FloatArray, own: FloatArray) -> FloatArray:
-            # The factor joins the previous scan's pose, not the reference's: its conversion
-            # to the reference time is the one that enters (they differ after a keyframe).
-            registered = factor_covariance(
+            return factor_covariance(
                 registration_covariance,
                 reference.pose,
                 reference.image_pose,
-                np.zeros((3, 3)),
                 node.pose,
                 own,
+                turn,
+                previous_conversion,
             )
-            return rotate_covariance(registered, turn) + previous_conversion
 
         node.revision = RevisionTerms(
             # What the revision keeps: all but the scan's own conversion (`_revise` adds it).

@@ -63,21 +63,22 @@ def factor_covariance(
     registration_covariance: FloatArray,
     reference_pose: FloatArray,
     reference_image_pose: FloatArray,
-    reference_conversion: FloatArray,
     pose: FloatArray,
     conversion: FloatArray,
+    previous_turn: float,
+    previous_conversion: FloatArray,
 ) -> FloatArray:
-    """(3, 3) covariance (reference axes) of the pose `pose` (3,) in the frame of the reference
-    at `reference_pose` (3,): the registration of the image frames (`registration_covariance`,
-    in the axes of the reference's image pose `reference_image_pose`) plus both conversions to
-    reference times (`reference_conversion`, `conversion`, each in its own scan's axes)."""
-    return (
-        rotate_covariance(
-            registration_covariance, float(between(reference_pose, reference_image_pose)[2])
-        )
-        + reference_conversion
-        + rotate_covariance(conversion, float(between(reference_pose, pose)[2]))
-    )
+    """(3, 3) covariance (previous scan's axes) of the factor from the previous scan to the pose
+    `pose` (3,), registered against the reference at `reference_pose` (3,): the registration of
+    the image frames (`registration_covariance`, in the axes of the reference's image pose
+    `reference_image_pose`), the scan's conversion to its reference time (`conversion`, its own
+    axes) and the previous scan's (`previous_conversion`, its axes). `previous_turn` [rad] turns
+    the reference's axes into the previous scan's. The factor joins the previous scan's pose, so
+    its conversion enters, not the reference's (they differ after a keyframe)."""
+    in_reference_axes = rotate_covariance(
+        registration_covariance, float(between(reference_pose, reference_image_pose)[2])
+    ) + rotate_covariance(conversion, float(between(reference_pose, pose)[2]))
+    return rotate_covariance(in_reference_axes, previous_turn) + previous_conversion
 
 
 @dataclass(frozen=True)

@@ -383,6 +383,13 @@ _HELD_OUT_TOWN_ROUTE: Waypoints = (
 )
 """Out, round a block and back along the street it came (as the 25 % drift town drive), on, and
 back again after a U-turn."""
+_HELD_OUT_TOWN_EVENTS = (
+    Stop(2, 10.0),
+    Stop(8, 5.0),
+    Stop(11, 10.0),
+    TurnAround(12, "u_turn", 45.0),
+)
+"""The stops and U-turn along `_HELD_OUT_TOWN_ROUTE` (heldout_town, heldout_fast)."""
 _HELD_OUT_JUNCTIONS_ROUTE: Waypoints = (
     (0, 0),
     (1, 0),
@@ -535,7 +542,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         start_ns=EPOCH_NS + 14 * DAY_NS,
         town=_plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
         plan=DrivePlan(
-            events=(Stop(2, 10.0), Stop(8, 5.0), Stop(11, 10.0), TurnAround(12, "u_turn", 45.0)),
+            events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(cruise_speed_mps=(11.0, 14.0)),
         ),
         held_out=True,
@@ -607,7 +614,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         start_ns=EPOCH_NS + 19 * DAY_NS,
         town=_plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
         plan=DrivePlan(
-            events=(Stop(2, 10.0), Stop(8, 5.0), Stop(11, 10.0), TurnAround(12, "u_turn", 45.0)),
+            events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(16.0, 20.0)),
         ),
         held_out=True,

@@ -54,6 +54,10 @@ CONFIG_CASES = [
         "loop_closure.verification.min_inlier_fraction",
     ),
     ("loop_closure: {covariance: {sigma_scale: -1}}", "loop_closure.covariance.sigma_scale"),
+    (
+        "loop_closure: {verification: {max_sigma_yaw_deg: 0}}",
+        "loop_closure.verification.max_sigma_yaw_deg",
+    ),
     ("loop_closure: {consistency: {window_m: 0}}", "loop_closure.consistency.window_m"),
     ("dataset: {range_resolution_m: 0}", "dataset.range_resolution_m"),
     ("dataset: {range_resolution_m: -0.05}", "dataset.range_resolution_m"),

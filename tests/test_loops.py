@@ -122,6 +122,29 @@ def test_loop_covariance_grows_as_quality_falls() -> None:
     assert np.trace(disagree) > np.trace(floor)
 
 
+def test_a_loop_swept_across_a_yaw_rate_step_is_rejected(tiny: RadarSequence) -> None:
+    """A scan whose yaw rate changes by 40 deg/s across its sweep (a curvature step) gets a
+    rotation sigma of several degrees; over `max_sigma_yaw_deg` the loop is rejected, saying
+    why, and without the limit the same loop is accepted with that sigma."""
+    step = np.array([0.0, 0.0, np.deg2rad(40.0)])
+    query = dataclasses.replace(key_scan(tiny, 40), twist_change=step)
+    match = key_scan(tiny, 36)
+    rejected = GeometricVerifier(LoopClosureConfig())(query, match)
+    assert not rejected.ok
+    assert "rotation too uncertain" in rejected.reason
+    unlimited = LoopClosureConfig(
+        verification=dataclasses.replace(
+            LoopClosureConfig().verification, max_sigma_yaw_deg=float("inf")
+        )
+    )
+    accepted = GeometricVerifier(unlimited)(query, match)
+    assert accepted.ok, accepted.reason
+    assert np.rad2deg(np.sqrt(accepted.covariance[2, 2])) > 2.0
+    steady = GeometricVerifier(LoopClosureConfig())(key_scan(tiny, 40), match)
+    assert steady.ok, steady.reason
+    assert np.rad2deg(np.sqrt(steady.covariance[2, 2])) < 1.0
+
+
 def test_verified_covariance_reflects_the_match_quality(tiny: RadarSequence) -> None:
     peak_only = LoopCovarianceConfig(disagreement_weight=0.0, min_sigma_xy_m=1e-3)
     verify = GeometricVerifier(LoopClosureConfig(covariance=peak_only))

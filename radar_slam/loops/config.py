@@ -28,6 +28,11 @@ class VerificationConfig:
         max_disagreement_m: the sinogram and phase-correlation translations may differ by this
             much [m].
         max_disagreement_deg: ... and their rotations by this much [deg].
+        max_sigma_yaw_deg: the loop's rotation standard deviation (`LoopCovarianceConfig`) may
+            be at most this [deg]. It is large when a scan was swept across a yaw-rate change
+            (a curvature step at a junction, the end of a turn), which no constant de-skew twist
+            represents: such loops' rotations are off by degrees. The default, 1 deg, puts the
+            2 deg error bound of a true loop (`radar_slam.evaluation.truth`) at two sigmas.
     """
 
     min_sinogram_quality: float = 0.25
@@ -36,6 +41,7 @@ class VerificationConfig:
     min_refined_quality: float = 12.0
     max_disagreement_m: float = 1.5
     max_disagreement_deg: float = 3.0
+    max_sigma_yaw_deg: float = 1.0
 
     def __post_init__(self) -> None:  # value ranges (issue 12)
         checks.finite("min_sinogram_quality", self.min_sinogram_quality)
@@ -44,6 +50,7 @@ class VerificationConfig:
         checks.non_negative("min_refined_quality", self.min_refined_quality)
         checks.positive("max_disagreement_m", self.max_disagreement_m, allow_inf=True)
         checks.positive("max_disagreement_deg", self.max_disagreement_deg, allow_inf=True)
+        checks.positive("max_sigma_yaw_deg", self.max_sigma_yaw_deg, allow_inf=True)
 
 
 @dataclass(frozen=True)

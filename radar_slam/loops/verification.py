@@ -7,7 +7,7 @@ b. refinement by phase correlation (`odometry.registration`) of the query and th
    the sinogram rotation; rejected when its peak is weak or when it disagrees with the sinogram
    estimate by more than `max_disagreement_m` / `_deg`;
 c. the covariance from the phase-correlation peak, inflated by the disagreement, floored
-   (`loop_covariance`).
+   (`loop_covariance`); rejected when its rotation is too uncertain (`max_sigma_yaw_deg`).
 """
 
 from __future__ import annotations
@@ -339,6 +339,14 @@ class GeometricVerifier:
             deskew_variance(query, match),
             swept_turn_variance(query, match),
         )
+        sigma_yaw_deg = float(np.rad2deg(np.sqrt(covariance[2, 2])))
+        if sigma_yaw_deg > vcfg.max_sigma_yaw_deg:
+            return failed(
+                f"rotation too uncertain (sigma {sigma_yaw_deg:.2f} deg > "
+                f"{vcfg.max_sigma_yaw_deg:.2f} deg: a scan swept across a yaw-rate change)",
+                refined,
+                estimate.quality,
+            )
         return Verification(
             True, "", refined, covariance, initial, initial_quality, float(estimate.quality)
         )

@@ -61,6 +61,7 @@ CONFIG_CASES = [
     ("loop_closure: {consistency: {window_m: 0}}", "loop_closure.consistency.window_m"),
     ("dataset: {range_resolution_m: 0}", "dataset.range_resolution_m"),
     ("dataset: {range_resolution_m: -0.05}", "dataset.range_resolution_m"),
+    ("dataset: {scan_rate_hz: 0}", "dataset.scan_rate_hz"),
     ("odometry: {coarse: {size_px: 0}}", "odometry.coarse.size_px"),
     ("odometry: {fine: {cell_m: -1}}", "odometry.fine.cell_m"),
     ("odometry: {coarse: {size_px: 9}}", "odometry.coarse.size_px"),

@@ -81,7 +81,7 @@ GP_COL_R00, GP_COL_X, GP_COL_R10, GP_COL_Y = 1, 4, 5, 8
 STAMP_FILES = ("sensor_data/navtech_top_stamp.csv", "navtech_top_stamp.csv")
 
 NOMINAL_SCAN_PERIOD_NS = int(round(NS_PER_S / SCAN_RATE_HZ))
-"""One revolution at 4 Hz [ns]: the scan period used when stamps cannot tell it."""
+"""One revolution at 4 Hz [ns] (the CIR204-H): the scan period used when stamps cannot tell it."""
 SCAN_PERIOD_TOLERANCE = 0.2
 """A gap between radar stamps counts as one scan period if within +-20 % of the nominal one."""
 GT_CLAMP_NS = 500_000_000
@@ -131,7 +131,9 @@ def column_azimuths_rad(n_azimuths: int = MULRAN_N_AZIMUTHS) -> NDArray[np.float
 
 
 def scan_periods_ns(
-    scan_stamps_ns: NDArray[np.int64], radar_stamps_ns: NDArray[np.int64]
+    scan_stamps_ns: NDArray[np.int64],
+    radar_stamps_ns: NDArray[np.int64],
+    nominal_period_ns: int = NOMINAL_SCAN_PERIOD_NS,
 ) -> NDArray[np.int64]:
     """Duration of the sweep ending at each scan stamp [ns].
 
@@ -139,22 +141,22 @@ def scan_periods_ns(
         scan_stamps_ns: (N,) end-of-sweep times of the scans.
         radar_stamps_ns: (M,) sorted end-of-sweep times of every sweep the radar recorded
             (navtech_top_stamp.csv, or the scan stamps themselves).
+        nominal_period_ns: one revolution of the radar [ns] (250 ms at 4 Hz).
 
     Returns:
         (N,) int64: the gap to the previous radar stamp when it is within the tolerance of one
-        revolution, otherwise the nominal 250 ms (first scan, dropped sweeps).
+        revolution, otherwise the nominal period (first scan, dropped or skipped sweeps: stamps
+        alone cannot tell a slower radar from sweeps left out).
     """
     previous_index = np.searchsorted(radar_stamps_ns, scan_stamps_ns, side="left") - 1
     has_previous = previous_index >= 0
     gaps = np.where(
         has_previous,
         scan_stamps_ns - radar_stamps_ns[np.maximum(previous_index, 0)],
-        NOMINAL_SCAN_PERIOD_NS,
+        nominal_period_ns,
     )
-    plausible = (
-        np.abs(gaps - NOMINAL_SCAN_PERIOD_NS) <= SCAN_PERIOD_TOLERANCE * NOMINAL_SCAN_PERIOD_NS
-    )
-    return np.where(plausible, gaps, NOMINAL_SCAN_PERIOD_NS).astype(np.int64)
+    plausible = np.abs(gaps - nominal_period_ns) <= SCAN_PERIOD_TOLERANCE * nominal_period_ns
+    return np.where(plausible, gaps, nominal_period_ns).astype(np.int64)
 
 
 def uniform_azimuth_times_ns(end_ns: int, period_ns: int, n_azimuths: int) -> NDArray[np.int64]:
@@ -267,6 +269,9 @@ class MulRanSequence:
         family: family name reported by the sequence (a generator writing MulRan layout may pass
             its own).
         azimuth_offset_rad: added to every azimuth [rad, CCW] (the `dataset:` config section).
+        scan_rate_hz: revolutions per second of the radar (the `dataset:` config section; 4 for
+            MulRan's CIR204-H). A scan's azimuths are spread over the gap to the previous radar
+            stamp when that is within 20 % of one revolution, else over one revolution.
 
     Raises:
         DatasetNotFoundError: `folder` does not exist.
@@ -281,6 +286,7 @@ class MulRanSequence:
         range_resolution_m: float = MULRAN_RANGE_RESOLUTION_M,
         family: str = MULRAN_FAMILY,
         azimuth_offset_rad: float = 0.0,
+        scan_rate_hz: float = SCAN_RATE_HZ,
     ) -> None:
         folder = Path(folder)
         if not folder.is_dir():
@@ -305,7 +311,10 @@ class MulRanSequence:
         gt_path = folder / GLOBAL_POSE_FILE
         self.gt_path: Path | None = gt_path if gt_path.is_file() else None
         radar_stamps = self._radar_stamps(folder, stamps)
-        self._periods_ns = scan_periods_ns(stamps, radar_stamps)
+        self.scan_rate_hz = float(scan_rate_hz)
+        self._periods_ns = scan_periods_ns(
+            stamps, radar_stamps, int(round(NS_PER_S / self.scan_rate_hz))
+        )
 
     @staticmethod
     def _radar_stamps(folder: Path, scan_stamps: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -388,5 +397,6 @@ MULRAN = register(
         detect=is_mulran_sequence,
         layout=MULRAN_LAYOUT,
         obtain=MULRAN_OBTAIN,
+        options=("range_resolution_m", "azimuth_offset_rad", "scan_rate_hz"),
     )
 )

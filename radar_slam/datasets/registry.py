@@ -42,10 +42,14 @@ class DatasetConfig:
         azimuth_offset_rad: added to every scan azimuth [rad, CCW]: an encoder zero that is
             not the vehicle's forward axis (or the ground truth's). None is 0 (no correction);
             see the README for what the Oxford samples show.
+        scan_rate_hz: revolutions per second of a radar whose files carry no azimuth times
+            (MulRan layout), which the azimuth times are spread over; None keeps the loader's
+            own (MulRan: 4; synthetic: the simulated sensor's).
     """
 
     range_resolution_m: float | None = None
     azimuth_offset_rad: float | None = None
+    scan_rate_hz: float | None = None
     # ROS bags only (radar_slam.datasets.rosbag): scan and GT topics, image layout.
     topic: str | None = None
     gt_topic: str | None = None
@@ -58,6 +62,8 @@ class DatasetConfig:
             checks.positive("range_resolution_m", self.range_resolution_m)
         if self.azimuth_offset_rad is not None:
             checks.finite("azimuth_offset_rad", self.azimuth_offset_rad)
+        if self.scan_rate_hz is not None:
+            checks.positive("scan_rate_hz", self.scan_rate_hz)
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""

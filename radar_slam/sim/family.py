@@ -22,7 +22,7 @@ from pathlib import Path
 
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.mulran import MulRanSequence
-from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
+from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M, SCAN_RATE_HZ
 from radar_slam.datasets.registry import Family, family_folder, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
 from radar_slam.results import check_writable, pid_alive
@@ -126,13 +126,18 @@ def resolve_synthetic(root: Path, name: str) -> Path:
 
 
 def open_synthetic(
-    folder: Path, range_resolution_m: float | None = None, azimuth_offset_rad: float = 0.0
+    folder: Path,
+    range_resolution_m: float | None = None,
+    azimuth_offset_rad: float = 0.0,
+    scan_rate_hz: float | None = None,
 ) -> RadarSequence:
-    """Open a simulated sequence with the MulRan loader (bin count and size from world.json).
+    """Open a simulated sequence with the MulRan loader (bin count, bin size and scan rate from
+    world.json).
 
     `range_resolution_m` overrides the simulated bin size (the `dataset:` config section), e.g.
     to study a mis-calibrated range resolution; `azimuth_offset_rad` is added to every azimuth
-    [rad, CCW] (e.g. to study an encoder zero offset).
+    [rad, CCW] (e.g. to study an encoder zero offset); `scan_rate_hz` overrides the simulated
+    revolutions per second.
     """
     folder = Path(folder)
     marker = _marker(folder)
@@ -149,8 +154,18 @@ def open_synthetic(
         resolution_m = float(sensor["range_resolution_m"])
     if range_resolution_m is not None:
         resolution_m = range_resolution_m
+    rate_hz = SCAN_RATE_HZ
+    if isinstance(sensor, dict) and "scan_rate_hz" in sensor:
+        rate_hz = float(sensor["scan_rate_hz"])
+    if scan_rate_hz is not None:
+        rate_hz = scan_rate_hz
     sequence = MulRanSequence(
-        folder, n_bins, resolution_m, family=SYNTHETIC_FAMILY, azimuth_offset_rad=azimuth_offset_rad
+        folder,
+        n_bins,
+        resolution_m,
+        family=SYNTHETIC_FAMILY,
+        azimuth_offset_rad=azimuth_offset_rad,
+        scan_rate_hz=rate_hz,
     )
     frames = marker.get("frames")
     if isinstance(frames, int) and len(sequence) != frames:
@@ -170,5 +185,6 @@ SYNTHETIC = register(
         obtain=SYNTHETIC_OBTAIN,
         resolve=resolve_synthetic,
         detect_priority=1,
+        options=("range_resolution_m", "azimuth_offset_rad", "scan_rate_hz"),
     )
 )

@@ -61,6 +61,8 @@ def test_scan_rate_spreads_the_azimuths_over_one_revolution(slow_mulran: Path) -
 def test_scan_rate_is_checked_and_refused_where_files_carry_times(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="scan_rate_hz"):
         DatasetConfig(scan_rate_hz=0.0)
+    with pytest.raises(ValueError, match="scan_rate_hz"):
+        MulRanSequence(tmp_path, scan_rate_hz=-4.0)
     folder = tmp_path / "oxford" / "drive"
     (folder / "radar").mkdir(parents=True)
     with pytest.raises(ConfigError, match="scan_rate_hz"):

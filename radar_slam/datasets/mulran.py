@@ -57,7 +57,7 @@ from radar_slam.datasets.navtech import (
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
-from raplace import se2
+from raplace import checks, se2
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
@@ -288,6 +288,7 @@ class MulRanSequence:
         azimuth_offset_rad: float = 0.0,
         scan_rate_hz: float = SCAN_RATE_HZ,
     ) -> None:
+        checks.positive("scan_rate_hz", scan_rate_hz)
         folder = Path(folder)
         if not folder.is_dir():
             raise DatasetNotFoundError(f"MulRan sequence folder {folder} does not exist")

@@ -145,6 +145,45 @@ def test_a_loop_swept_across_a_yaw_rate_step_is_rejected(tiny: RadarSequence) ->
     assert np.rad2deg(np.sqrt(steady.covariance[2, 2])) < 1.0
 
 
+@pytest.fixture(scope="module")
+def turn_around(tmp_path_factory: pytest.TempPathFactory) -> RadarSequence:
+    """The simulator's `tiny_turn_around` (reduced bins)."""
+    folder = tmp_path_factory.mktemp("loops") / "tiny_turn_around"
+    generate_sequence(get_scenario("tiny_turn_around"), folder)
+    return open_synthetic(folder)
+
+
+@pytest.mark.parametrize("query", [45, 60])
+def test_a_query_de_skewed_off_at_one_hertz_gets_its_yaw_rate_searched(
+    turn_around: RadarSequence, query: int
+) -> None:
+    """A query de-skewed 25 deg/s off its sweep's yaw rate measures the loop's rotation nearly
+    3 deg off. With its twist interpolated between steps a second apart (1 Hz) the verifier
+    searches the query's yaw rate by peak quality and gets within 1.3 deg; with steps 0.25 s
+    apart (4 Hz) it does not search; a right twist is left as it is."""
+    match = query - 4
+    truth = gt_relative(turn_around, query, match)
+
+    def rotation_error_deg(result: Verification) -> float:
+        assert result.ok, result.reason
+        return abs(float(np.rad2deg(between(truth, result.measurement)[2])))
+
+    def verified(offset_dps: float, span_s: float) -> Verification:
+        scan = key_scan(turn_around, query)
+        assert scan.twist is not None
+        off = scan.twist + np.array([0.0, 0.0, np.deg2rad(offset_dps)])
+        return GeometricVerifier(LoopClosureConfig())(
+            dataclasses.replace(scan, twist=off, twist_span_s=span_s),
+            key_scan(turn_around, match),
+        )
+
+    at_4hz = rotation_error_deg(verified(25.0, 0.25))
+    at_1hz = rotation_error_deg(verified(25.0, 1.0))
+    assert at_4hz > 2.0
+    assert at_1hz < 1.3
+    assert rotation_error_deg(verified(0.0, 1.0)) < 0.2
+
+
 def test_verified_covariance_reflects_the_match_quality(tiny: RadarSequence) -> None:
     peak_only = LoopCovarianceConfig(disagreement_weight=0.0, min_sigma_xy_m=1e-3)
     verify = GeometricVerifier(LoopClosureConfig(covariance=peak_only))

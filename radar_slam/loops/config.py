@@ -33,6 +33,11 @@ class VerificationConfig:
             (a curvature step at a junction, the end of a turn), which no constant de-skew twist
             represents: such loops' rotations are off by degrees. The default, 1 deg, puts the
             2 deg error bound of a true loop (`radar_slam.evaluation.truth`) at two sigmas.
+        yaw_rate_search: at low frame rates (a query twist interpolated between odometry steps
+            at least `refinement.deskew.yaw_rate_search_min_interval_s` apart), the query's
+            de-skew yaw rate is searched by peak quality against the match (one round of
+            `odometry.rate_search`, half-width `refinement.deskew.yaw_rate_search_dps`): in a
+            turn at 1 Hz the interpolated yaw rate can be tens of deg/s off the sweep's.
     """
 
     min_sinogram_quality: float = 0.25
@@ -42,6 +47,7 @@ class VerificationConfig:
     max_disagreement_m: float = 1.5
     max_disagreement_deg: float = 3.0
     max_sigma_yaw_deg: float = 1.0
+    yaw_rate_search: bool = True
 
     def __post_init__(self) -> None:  # value ranges (issue 12)
         checks.finite("min_sinogram_quality", self.min_sinogram_quality)

@@ -319,10 +319,12 @@ class LoopDetector:
         if held is None:
             return []
         track = self._track
-        twist = change = None
+        twist = change = span_s = None
         if held.pose is not None:
             twist = sweep_twist(held.before, after, mean_acquisition_time_ns(held.scan))
             change = twist_change(held.before, after)
+            if held.before is not None and after is not None:
+                span_s = (after.time_ns - held.before.time_ns) / NS_PER_S
         changes: dict[int, LoopStatus] = {}
         if held.pose is not None:
             changes.update(self.gate.expire(held.path_m))
@@ -330,7 +332,7 @@ class LoopDetector:
             held.pose is None
         ):
             track.path_at_last_entry_m = held.path_m
-            changes.update(self._query_and_insert(held, twist, change))
+            changes.update(self._query_and_insert(held, twist, change, span_s))
         self.throttle.resolved(changes)
         return self._apply(changes)
 
@@ -368,7 +370,11 @@ class LoopDetector:
         return scan
 
     def _query_and_insert(
-        self, held: _Held, twist: FloatArray | None, change: FloatArray | None = None
+        self,
+        held: _Held,
+        twist: FloatArray | None,
+        change: FloatArray | None = None,
+        span_s: float | None = None,
     ) -> dict[int, LoopStatus]:
         cfg = self.config
         scan, pose, key = held.scan, held.pose, held.key
@@ -408,7 +414,7 @@ class LoopDetector:
             entry.path_m, [self._entries[c.key].path_m for c in candidates]
         ):
             return changes
-        query = KeyScan(key, entry.timestamp_ns, scan, twist, change)
+        query = KeyScan(key, entry.timestamp_ns, scan, twist, change, span_s)
         passed = 0
         for candidate in candidates:  # at most `candidates` (k), best first
             match = self._entries[candidate.key]

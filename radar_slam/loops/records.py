@@ -136,6 +136,9 @@ class KeyScan:
         twist_change: (3,) change of the odometry's twist across the scan (the step after's
             minus the step before's, same units), or None; the de-skew twist's error grows
             with it (`LoopCovarianceConfig.deskew_error_fraction`).
+        twist_span_s: time between the two odometry steps' middles the twist was interpolated
+            between [s] (about the scan interval), or None; at low frame rates the sweep's yaw
+            rate can be far from that interpolation (`VerificationConfig.yaw_rate_search`).
     """
 
     key: int
@@ -143,6 +146,7 @@ class KeyScan:
     scan: Scan
     twist: FloatArray | None = None
     twist_change: FloatArray | None = None
+    twist_span_s: float | None = None
 
 
 @dataclass(frozen=True)

@@ -17,16 +17,17 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from odometry import rate_search
 from odometry.config import PreprocessConfig
 from odometry.deskew import motion_from_twist
 from odometry.preprocess import PolarScan
-from odometry.registration import PreparedScan, prepare, register
+from odometry.registration import MotionEstimate, PreparedScan, prepare, register
 from odometry.scan import RadarFrame, Scan
 from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig, LoopCovarianceConfig
 from radar_slam.loops.records import KeyScan, Verification
 from raplace.pose import PoseEstimator, PoseSpectrum, RelativePose
-from raplace.se2 import between, compose, rotate_covariance, wrap_angle
+from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
@@ -242,6 +243,37 @@ class GeometricVerifier:
         twist = query.twist if refinement.deskew.enabled else None
         return PreparedScan(polar, twist, refinement)
 
+    def _searched_query(
+        self,
+        query: KeyScan,
+        prepared: PreparedScan,
+        aligned: PreparedScan,
+        estimate: MotionEstimate,
+    ) -> MotionEstimate:
+        """`estimate`, or the registration with the query de-skewed at a searched yaw rate when
+        that correlates more strongly (`VerificationConfig.yaw_rate_search`; low frame rates
+        only). The search registers the query variants against the match (`rate_search`); the
+        result is registered again the usual way round, seeded with `estimate`."""
+        refinement = self.cfg.refinement
+        span = query.twist_span_s
+        if (
+            not self.cfg.verification.yaw_rate_search
+            or refinement.deskew.yaw_rate_search_dps <= 0.0
+            or prepared.twist is None
+            or span is None
+            or span < refinement.deskew.yaw_rate_search_min_interval_s
+            or not estimate.ok
+        ):
+            return estimate
+        swapped = register(aligned, prepared, refinement, inverse(estimate.motion))
+        if not swapped.ok:
+            return estimate
+        found, _ = rate_search.searched(aligned, prepared, swapped, refinement, register)
+        if found is prepared:
+            return estimate
+        again = register(found, aligned, refinement, estimate.motion)
+        return again if again.ok and again.quality > estimate.quality else estimate
+
     def _map_spectrum(self, match: KeyScan) -> PoseSpectrum:
         key = (match.key, int(match.timestamp_ns))  # a key reused for another scan misses
         spectrum = self._map_spectra.get(key)
@@ -309,7 +341,9 @@ class GeometricVerifier:
         # A prediction also seeds the registration (its translation; the match is turned by its
         # rotation): one rotation and half-turn hypothesis instead of a global search.
         hint = None if np.isfinite(initial_quality) else np.array([initial[0], initial[1], 0.0])
-        estimate = register(self._prepared_query(query), aligned, self.cfg.refinement, hint)
+        prepared_query = self._prepared_query(query)
+        estimate = register(prepared_query, aligned, self.cfg.refinement, hint)
+        estimate = self._searched_query(query, prepared_query, aligned, estimate)
         refined = compose(estimate.motion, np.array([0.0, 0.0, turn]))
         if not estimate.ok:
             return failed(f"phase correlation failed: {estimate.reason}", nan3, estimate.quality)

@@ -209,3 +209,6 @@ def test_detector_de_skews_each_scan_with_its_mid_sweep_velocity(tiny: RadarSequ
         if k == n - 1:  # the last scan has no step after it: the step before
             expected = twist_from_motion(step(k - period_s, k), period_s)
         np.testing.assert_allclose(query.twist, expected, atol=1e-6)
+        # the steps' middles the twist lies between are one period apart (none after the last)
+        span = query.twist_span_s
+        assert span is None if k == n - 1 else span == pytest.approx(period_s, abs=1e-6)

@@ -4,6 +4,7 @@ radar that does not turn at 4 Hz (the file names give only the end of each sweep
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import pytest
 
 from radar_slam.datasets import MulRanSequence, open_sequence
 from radar_slam.datasets.registry import DatasetConfig
-from radar_slam.errors import ConfigError
+from radar_slam.errors import ConfigError, DatasetFormatError
 from radar_slam.pipeline import Pipeline, PipelineConfig
 from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
@@ -86,3 +87,17 @@ def test_a_radar_turning_at_two_hertz_is_de_skewed_over_its_half_second_sweeps(
     wrong = Pipeline(open_synthetic(folder, scan_rate_hz=4.0), config).run().odometry_metrics
     assert right.drift_trans_pct <= DRIFT_PCT_MAX
     assert wrong.drift_trans_pct > 3 * right.drift_trans_pct
+
+
+def test_a_bad_simulated_scan_rate_names_world_json(tmp_path: Path) -> None:
+    """A world.json whose sensor.scan_rate_hz is not a positive number is refused naming the
+    file and the key, before any scan is read."""
+    folder = tmp_path / "tiny"
+    generate_sequence(get_scenario("tiny"), folder)
+    world_path = folder / "world.json"
+    world = json.loads(world_path.read_text())
+    assert open_synthetic(folder).scan_rate_hz == pytest.approx(world["sensor"]["scan_rate_hz"])
+    world["sensor"]["scan_rate_hz"] = 0
+    world_path.write_text(json.dumps(world))
+    with pytest.raises(DatasetFormatError, match=r"world\.json: sensor\.scan_rate_hz"):
+        open_synthetic(folder)

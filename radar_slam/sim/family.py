@@ -148,24 +148,28 @@ def open_synthetic(
         )
     world = read_json(folder / WORLD_FILE) or {}
     sensor = world.get("sensor", {})
-    n_bins, resolution_m = MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M
-    if isinstance(sensor, dict) and "n_bins" in sensor and "range_resolution_m" in sensor:
-        n_bins = int(sensor["n_bins"])
-        resolution_m = float(sensor["range_resolution_m"])
-    if range_resolution_m is not None:
-        resolution_m = range_resolution_m
-    rate_hz = SCAN_RATE_HZ
-    if isinstance(sensor, dict) and "scan_rate_hz" in sensor:
-        rate_hz = float(sensor["scan_rate_hz"])
-    if scan_rate_hz is not None:
-        rate_hz = scan_rate_hz
+    if not isinstance(sensor, dict):
+        sensor = {}
+
+    def recorded(key: str, default: float) -> float:
+        """The simulated sensor's positive `key` from world.json, else `default`."""
+        value = sensor.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+            raise DatasetFormatError(
+                f"{folder / WORLD_FILE}: sensor.{key} must be a positive number, got {value!r}"
+            )
+        return float(value)
+
+    resolution_m = recorded("range_resolution_m", MULRAN_RANGE_RESOLUTION_M)
     sequence = MulRanSequence(
         folder,
-        n_bins,
-        resolution_m,
+        int(recorded("n_bins", MULRAN_N_BINS)),
+        resolution_m if range_resolution_m is None else range_resolution_m,
         family=SYNTHETIC_FAMILY,
         azimuth_offset_rad=azimuth_offset_rad,
-        scan_rate_hz=rate_hz,
+        scan_rate_hz=recorded("scan_rate_hz", SCAN_RATE_HZ)
+        if scan_rate_hz is None
+        else scan_rate_hz,
     )
     frames = marker.get("frames")
     if isinstance(frames, int) and len(sequence) != frames:

@@ -27,13 +27,18 @@ class PreprocessConfig:
     """Clean-up of a polar scan before it is warped to a Cartesian image.
 
     Applied after range bins are averaged down to the image cell size (which already reduces
-    speckle), in this order: per-range-bin median removal, near-range mask, noise floor,
-    intensity transform.
+    speckle), in this order: per-range-bin median removal, per-azimuth median removal,
+    near-range mask, noise floor, intensity transform.
 
     Attributes:
         ring_noise_removal: subtract each range bin's median over azimuths (removes ring noise
             and the part of the saturated near range that does not depend on azimuth); negative
             values are clipped to 0.
+        spoke_removal: then subtract each azimuth's median over range (removes the radial
+            streaks of real Navtech scans, bright along whole azimuths: they stay with the
+            sensor and pull translation estimates toward zero). On by default for the relative
+            pose (`PoseConfig`); off for descriptors, whose distances it raised for neighbouring
+            scans (which share the streaks) as well as for other places.
         min_range_m: bins closer than this are zeroed (saturated near range, the vehicle) [m].
         noise_floor: intensity subtracted after the median removal, clipped at 0 (uint8 units).
         intensity: "linear" keeps the (dB-like) uint8 scale, "log1p" compresses it, "square"
@@ -41,6 +46,7 @@ class PreprocessConfig:
     """
 
     ring_noise_removal: bool = True
+    spoke_removal: bool = False
     min_range_m: float = 3.0
     noise_floor: float = 0.0
     intensity: IntensityTransform = "linear"
@@ -198,7 +204,9 @@ class PoseConfig:
             estimate, then re-solve the translation).
     """
 
-    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    preprocess: PreprocessConfig = field(
+        default_factory=lambda: PreprocessConfig(spoke_removal=True)
+    )
     image: ImageConfig = field(default_factory=lambda: ImageConfig(cell_m=0.5, max_range_m=64.0))
     n_theta: int = 180
     pad_factor: int = 2

@@ -72,6 +72,8 @@ def suppress_noise(
     out = np.array(polar, dtype=np.float32, copy=True)
     if cfg.ring_noise_removal:
         out -= np.median(out, axis=0, keepdims=True)
+    if cfg.spoke_removal:
+        out -= np.median(out, axis=1, keepdims=True)
     if cfg.noise_floor > 0:
         out -= np.float32(cfg.noise_floor)
     np.maximum(out, 0.0, out=out)

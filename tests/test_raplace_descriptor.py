@@ -69,6 +69,20 @@ def test_suppress_noise_removes_rings_and_near_range() -> None:
     assert clean.min() >= 0.0
 
 
+def test_suppress_noise_removes_spokes() -> None:
+    rng = np.random.default_rng(1)
+    polar = rng.uniform(0, 5, (400, 200)).astype(np.float32)
+    polar[90, :] += 40.0  # a radial streak: the whole azimuth raised
+    polar[90, 150] += 100.0  # a real target on it
+    polar[37, 60] += 100.0  # and one elsewhere
+    kept = suppress_noise(polar, 0.5, PreprocessConfig(spoke_removal=False))
+    clean = suppress_noise(polar, 0.5, PreprocessConfig(spoke_removal=True))
+    assert np.median(kept[90, 20:]) > 35.0
+    assert np.median(clean[90, 20:]) < 3.0
+    assert clean[90, 150] > 95.0
+    assert clean[37, 60] > 95.0
+
+
 def test_fourier_slice_matches_skimage_radon(world: np.ndarray) -> None:
     cell = 1.0
     image = render_cart(world, WORLD_CELL_M, (10.0, -5.0, 0.3), cell, 64.0, subtract_mean=False)

@@ -10,6 +10,7 @@ import pytest
 
 from radar_slam.sim.generate import build_scene
 from radar_slam.sim.physics import (
+    Glint,
     MotionDistortion,
     Multipath,
     NoiseFloor,
@@ -234,3 +235,27 @@ def test_every_effect_can_be_switched_off(effect: str) -> None:
     scan = scan_of(assemble_world(front, front_occ), physics)
     assert scan.shape == (400, N_BINS)
     assert scan[column_of(FRONT_X_M, 0.0)].max() > 60  # the facade is still there
+
+
+def _level_seen_from(world, bearing: float, physics: PhysicsConfig) -> int:
+    """Output level of a point target at (20, 0) seen from 20 m away along world `bearing`."""
+    target = np.array([20.0, 0.0])
+    sensor = target - 20.0 * np.array([np.cos(bearing), np.sin(bearing)])
+    poses = np.tile([sensor[0], sensor[1], bearing], (400, 1))
+    scan = render_scan(
+        world, poses, np.zeros(400), make_tables(SENSOR, physics), np.random.default_rng(0)
+    )
+    col, b = column_of(20.0, 0.0), bin_of(20.0)
+    return int(scan[[(col + d) % 400 for d in (-1, 0, 1)], b - 5 : b + 5].max())
+
+
+def test_glint_makes_a_target_brighter_or_dimmer_by_bearing() -> None:
+    world = assemble_world(point_scatterers(np.array([[20.0, 0.0]]), POINT_DB), NO_OCCLUDERS)
+    glint = replace(QUIET, glint=Glint(enabled=True, amplitude_db=10.0, lobes=6.0))
+    bearings = np.deg2rad(np.arange(0.0, 60.0, 5.0))  # one lobe period
+    plain = [_level_seen_from(world, b, QUIET) for b in bearings]
+    varied = [_level_seen_from(world, b, glint) for b in bearings]
+    assert max(plain) - min(plain) <= 2  # isotropic without glint
+    # +-10 dB is +-20 output levels (0.5 dB per level); the compression knee takes some.
+    assert max(varied) - min(varied) > 25
+    assert _level_seen_from(world, bearings[3], glint) == varied[3]  # fixed per bearing

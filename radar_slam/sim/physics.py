@@ -133,6 +133,27 @@ class Speckle:
 
 
 @dataclass(frozen=True)
+class Glint:
+    """Aspect-dependent reflectivity of static scatterers: each one's mean power varies with the
+    world bearing it is seen from, by amplitude_db * sin(lobes * bearing + phase) [dB], the phase
+    fixed per scatterer. Real objects (cars, poles, bushes, facade details) look different from a
+    few metres further on, so real scans decorrelate with distance faster than scans of
+    isotropic points (README, "Where the simulator is easier than the real scans").
+
+    Off by default (every scenario stays as generated); probes switch it on.
+
+    Attributes:
+        enabled: modulate the static scatterers' power by bearing.
+        amplitude_db: peak modulation [dB].
+        lobes: lobes per turn of the bearing (angular period 360 / lobes deg).
+    """
+
+    enabled: bool = False
+    amplitude_db: float = 6.0
+    lobes: float = 8.0
+
+
+@dataclass(frozen=True)
 class BeamPattern:
     """Azimuth antenna pattern: Gaussian main lobe of the sensor's beamwidth, plus sidelobes
     that smear strong returns into faint arcs (as around bright targets in real scans).
@@ -290,6 +311,7 @@ class PhysicsConfig:
     elevation: Elevation = field(default_factory=Elevation)
     occlusion: Occlusion = field(default_factory=Occlusion)
     speckle: Speckle = field(default_factory=Speckle)
+    glint: Glint = field(default_factory=Glint)
     beam_pattern: BeamPattern = field(default_factory=BeamPattern)
     multipath: Multipath = field(default_factory=Multipath)
     noise_floor: NoiseFloor = field(default_factory=NoiseFloor)

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from radar_slam.sim.physics import (
     LUT_STEPS_PER_LEVEL,
     OUTPUT_LEVELS_PER_DECADE,
+    Glint,
     PhysicsConfig,
     beam_offsets,
     beam_sigma_columns,
@@ -62,6 +63,8 @@ RANGE_DECIMATION = 2
 MIN_VISIBLE_POWER = 0.2
 """Scatterers weaker than this at their range (before speckle) are skipped [counts]; the
 noise floor is 2.2 counts."""
+GOLDEN_FRACTION = 0.6180339887498949
+"""Scatterer index -> glint phase: the fractional parts of multiples of it are well spread."""
 TRAFFIC_MARGIN_M = 30.0
 """Moving vehicles this far beyond the maximum range are still considered [m]."""
 VEHICLE_SCATTERER_HEIGHT_M = 0.8
@@ -284,12 +287,24 @@ def _static_returns(
     cos_inc = np.abs(dx * sc.nx[ok] + dy * sc.ny[ok]) / r
     diffuse = sc.diffuse[ok]
     incidence = diffuse + (np.float32(1) - diffuse) * cos_inc ** np.float32(world.specular_exponent)
+    if phys.glint.enabled:
+        incidence *= glint_gain(index[visible][ok], dx, dy, phys.glint)
     slant, elevation_gain = _elevation(r, sc.z[ok], phys)
     # numpy's stubs drop the float32 precision of this product; all factors are float32.
     power = cast(F32, sc.power[ok] * path_gain(slant, phys.path_loss) * incidence * elevation_gain)
     if buffer is not None:
         power *= _occlusion_gain(buffer, nearest, r, sc.owner[ok], phys.occlusion.tolerance_m)
     return Returns(column, slant, power, np.zeros(0, np.float32)), sc.ghost_delay_m[ok]
+
+
+def glint_gain(scatterer: NDArray[np.int64], dx: F32, dy: F32, cfg: Glint) -> F32:
+    """Power gain (N,) of scatterers (world indices) seen along world offsets (dx, dy) [m]:
+    10 ** (amplitude_db * sin(lobes * bearing + phase) / 10), the phase a fixed function of the
+    scatterer's index (`Glint`)."""
+    phase = np.mod(scatterer.astype(np.float64) * GOLDEN_FRACTION, 1.0) * (2.0 * np.pi)
+    bearing = np.arctan2(dy, dx).astype(np.float64)
+    gain_db = cfg.amplitude_db * np.sin(cfg.lobes * bearing + phase)
+    return np.power(10.0, 0.1 * gain_db).astype(np.float32)
 
 
 def _elevation(

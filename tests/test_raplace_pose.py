@@ -13,6 +13,7 @@ from raplace import RaPlaceError
 from raplace.config import ImageConfig, PoseConfig, PreprocessConfig
 from raplace.pose import PoseEstimator, fit_translation, relative_pose
 from raplace.preprocess import CartesianImager
+from raplace.se2 import compose
 
 WORLD_CELL_M = 0.25
 CFG = PoseConfig()
@@ -104,9 +105,7 @@ def test_oxford_scans_far_apart_keep_their_inliers(oxford_dir, oxford_polar_scan
     truth = np.zeros(3)  # the last scan in the first one's frame (x-fwd, y-left, CCW)
     for stem in stems[:-1]:
         row = rows[stem]
-        step = np.array([float(row["x"]), -float(row["y"]), -float(row["yaw"])])
-        c, s = np.cos(truth[2]), np.sin(truth[2])
-        truth = truth + np.array([c * step[0] - s * step[1], s * step[0] + c * step[1], step[2]])
+        truth = compose(truth, np.array([float(row["x"]), -float(row["y"]), -float(row["yaw"])]))
     assert np.hypot(truth[0], truth[1]) > 12.0
     inliers = {}
     for spokes in (True, False):

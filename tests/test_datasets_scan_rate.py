@@ -101,3 +101,8 @@ def test_a_bad_simulated_scan_rate_names_world_json(tmp_path: Path) -> None:
     world_path.write_text(json.dumps(world))
     with pytest.raises(DatasetFormatError, match=r"world\.json: sensor\.scan_rate_hz"):
         open_synthetic(folder)
+    world["sensor"]["scan_rate_hz"] = 4.0
+    world["sensor"]["n_bins"] = 3360.5
+    world_path.write_text(json.dumps(world))
+    with pytest.raises(DatasetFormatError, match=r"sensor\.n_bins must be a positive whole number"):
+        open_synthetic(folder)

@@ -151,19 +151,26 @@ def open_synthetic(
     if not isinstance(sensor, dict):
         sensor = {}
 
-    def recorded(key: str, default: float) -> float:
-        """The simulated sensor's positive `key` from world.json, else `default`."""
+    def recorded(key: str, default: float, whole: bool = False) -> float:
+        """The simulated sensor's positive `key` from world.json (a whole number if `whole`),
+        else `default`."""
         value = sensor.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+        kind = "whole number" if whole else "number"
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, float))
+            or not value > 0
+            or (whole and not float(value).is_integer())
+        ):
             raise DatasetFormatError(
-                f"{folder / WORLD_FILE}: sensor.{key} must be a positive number, got {value!r}"
+                f"{folder / WORLD_FILE}: sensor.{key} must be a positive {kind}, got {value!r}"
             )
         return float(value)
 
     resolution_m = recorded("range_resolution_m", MULRAN_RANGE_RESOLUTION_M)
     sequence = MulRanSequence(
         folder,
-        int(recorded("n_bins", MULRAN_N_BINS)),
+        int(recorded("n_bins", MULRAN_N_BINS, whole=True)),
         resolution_m if range_resolution_m is None else range_resolution_m,
         family=SYNTHETIC_FAMILY,
         azimuth_offset_rad=azimuth_offset_rad,

@@ -280,7 +280,8 @@ def _static_returns(
     log_reach = np.float32(np.log(tables.sensor.max_range_m + CULL_MARGIN_M))
     loudness = np.log(all_sc.power[index]) + log_path_gain(log_r, phys.path_loss)
     visible = (log_r < log_reach) & (loudness > np.float32(np.log(MIN_VISIBLE_POWER)))
-    sc = all_sc.take(index[visible])
+    kept = index[visible]
+    sc = all_sc.take(kept)
     column, nearest, r, dx, dy = project(sc.x, sc.y, column_poses, tables)
     ok = (r > MIN_RANGE_M) & (r < tables.sensor.max_range_m)
     column, nearest, r, dx, dy = column[ok], nearest[ok], r[ok], dx[ok], dy[ok]
@@ -288,7 +289,7 @@ def _static_returns(
     diffuse = sc.diffuse[ok]
     incidence = diffuse + (np.float32(1) - diffuse) * cos_inc ** np.float32(world.specular_exponent)
     if phys.glint.enabled:
-        incidence *= glint_gain(index[visible][ok], dx, dy, phys.glint)
+        incidence *= glint_gain(kept[ok], dx, dy, phys.glint)
     slant, elevation_gain = _elevation(r, sc.z[ok], phys)
     # numpy's stubs drop the float32 precision of this product; all factors are float32.
     power = cast(F32, sc.power[ok] * path_gain(slant, phys.path_loss) * incidence * elevation_gain)

@@ -312,6 +312,7 @@ class Odometry:
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
             scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
             scan, estimate = self._rate_searched(reference, scan, estimate, interval_s)
+            scan, estimate = self._step_searched(reference, base, scan, estimate, interval_s)
             image_pose = compose(reference.image_pose, estimate.motion)
             before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)
@@ -432,6 +433,34 @@ class Odometry:
             return scan, estimate
         return rate_search.searched(reference.scan, scan, estimate, cfg, register_images, rounds)
 
+    def _step_searched(
+        self,
+        reference: ScanNode,
+        base: ScanNode,
+        scan: PreparedScan,
+        estimate: MotionEstimate,
+        interval_s: float,
+    ) -> tuple[PreparedScan, MotionEstimate]:
+        """`scan` and its estimate, or the scan de-skewed with a step of the yaw rate within its
+        sweep where the yaw rate measured since `base` (`interval_s` before) stepped from a
+        steady one (`rate_search.step_wanted`)."""
+        velocity = self._state.velocity
+        if velocity is None or interval_s <= 0:
+            return scan, estimate
+        image_pose = compose(reference.image_pose, estimate.motion)
+        measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
+        rates = rate_search.StepRates(
+            before=float(velocity.twist[2]),
+            prior_change=velocity.yaw_rate_change,
+            measured=float(measured[2]),
+            interval_s=interval_s,
+        )
+        if not rate_search.step_wanted(scan, estimate, rates, self.config):
+            return scan, estimate
+        return rate_search.step_searched(
+            reference.scan, scan, estimate, rates, self.config, register_images
+        )
+
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(
         self, reference: ScanNode, scan: PreparedScan, image_motion: FloatArray
@@ -516,8 +545,8 @@ class Odometry:
         if velocity is None or not self.config.deskew.enabled or scan.polar.timing is None:
             return scan
         new = self._velocity_at(image_time_ns(scan))
-        if scan.twist is not None and close_twists(new, scan.twist):
-            return scan
+        if scan.rate_step is not None or (scan.twist is not None and close_twists(new, scan.twist)):
+            return scan  # a rate step was chosen by the images, not the velocity
         return PreparedScan(scan.polar, new, self.config)
 
     def _trend_hypothesis(

@@ -409,10 +409,7 @@ class Odometry:
         image). The re-registration is seeded with the first estimate."""
         if scan.twist is None or self._state.velocity is None or interval_s <= 0:
             return scan, estimate
-        image_pose = compose(reference.image_pose, estimate.motion)
-        measured = bounded_twist(
-            twist_from_motion(between(base.image_pose, image_pose), interval_s), self.config
-        )
+        measured = bounded_twist(measured_twist(reference, base, estimate, interval_s), self.config)
         if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
             return scan, estimate
         again = PreparedScan(scan.polar, measured, self.config)
@@ -447,8 +444,7 @@ class Odometry:
         velocity = self._state.velocity
         if velocity is None or interval_s <= 0:
             return scan, estimate
-        image_pose = compose(reference.image_pose, estimate.motion)
-        measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
+        measured = measured_twist(reference, base, estimate, interval_s)
         rates = rate_search.StepRates(
             before=float(velocity.twist[2]),
             prior_change=velocity.yaw_rate_change,
@@ -636,3 +632,12 @@ class Odometry:
         )
         self._state.history.append(result)
         return result
+
+
+def measured_twist(
+    reference: ScanNode, base: ScanNode, estimate: MotionEstimate, interval_s: float
+) -> FloatArray:
+    """The twist that moves `base`'s image frame to the one `estimate` places against
+    `reference`, over `interval_s` [s]."""
+    image_pose = compose(reference.image_pose, estimate.motion)
+    return twist_from_motion(between(base.image_pose, image_pose), interval_s)

@@ -4,6 +4,7 @@ per test session."""
 
 from __future__ import annotations
 
+import dataclasses
 from importlib.util import find_spec
 from pathlib import Path
 
@@ -13,8 +14,8 @@ from numpy.typing import NDArray
 from raplace_scenes import oxford_scans
 
 from radar_slam.cli import main
-from radar_slam.datasets import open_sequence
-from radar_slam.datasets.frame import RadarSequence
+from radar_slam.datasets import OxfordSequence, open_sequence
+from radar_slam.datasets.frame import RadarFrame, RadarSequence
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 OXFORD_SEQ = SHARED_DATA / "oxford" / "2019-01-10-14-36-48-partial"
@@ -43,6 +44,18 @@ def oxford_dir() -> Path:
 def mulran_raw_dir() -> Path:
     """One real MulRan scan: raw CSV and the polar PNG."""
     return _require(MULRAN_RAW)
+
+
+@pytest.fixture(scope="module")
+def oxford(oxford_dir: Path) -> OxfordSequence:
+    """The partial Oxford sequence, opened once per test module."""
+    return OxfordSequence(oxford_dir)
+
+
+@pytest.fixture(scope="module")
+def oxford_snapshot(oxford: OxfordSequence) -> RadarFrame:
+    """The first Oxford scan without azimuth times: an instantaneous picture of the world."""
+    return dataclasses.replace(oxford[0], azimuth_times_ns=None)
 
 
 @pytest.fixture(scope="module")

@@ -20,11 +20,6 @@ N_FRAMES = 7
 ODOMETRY_CSV = "gt/radar_odometry.csv"
 
 
-@pytest.fixture(scope="module")
-def oxford(oxford_dir: Path) -> OxfordSequence:
-    return OxfordSequence(oxford_dir)
-
-
 def copy_sequence(oxford_dir: Path, target: Path, n_scans: int = 3, gt: bool = True) -> Path:
     """A writable copy of the first `n_scans` scans (plus radar.timestamps and GT)."""
     (target / "radar").mkdir(parents=True)

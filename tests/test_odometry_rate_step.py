@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,17 +28,6 @@ MIN_CONSTANT_ERROR_DEG = 0.2
 """A constant de-skew at the sweep's mean rate turns the image by the mean of the yaw it gets
 wrong over the sweep: 40 deg/s x 0.25 s / 8 = 1.25 deg at a mid-sweep step, 0.34 deg at a step
 60 ms before mid-sweep; the test means something only where the constant twist is that far off."""
-
-
-@pytest.fixture(scope="module")
-def oxford(oxford_dir: Path) -> OxfordSequence:
-    return OxfordSequence(oxford_dir)
-
-
-@pytest.fixture(scope="module")
-def snapshot(oxford: OxfordSequence) -> RadarFrame:
-    """The first real scan without azimuth times: an instantaneous picture of the world."""
-    return dataclasses.replace(oxford[0], azimuth_times_ns=None)
 
 
 def yaw_at(tau_s: np.ndarray, step_s: float) -> np.ndarray:
@@ -78,12 +66,12 @@ def yaw_error_deg(estimate: MotionEstimate, truth: np.ndarray) -> float:
 
 @pytest.mark.parametrize("step_s", [-0.06, 0.0, 0.05])
 def test_rate_step_deskew_follows_a_step_no_constant_twist_does(
-    snapshot: RadarFrame, step_s: float
+    oxford_snapshot: RadarFrame, step_s: float
 ) -> None:
     cfg = OdometryConfig()
     start = np.array([2.0, 0.3, np.deg2rad(2.0)])
-    scan = stepped_scan(snapshot, start, step_s)
-    reference = prepare(snapshot, cfg)
+    scan = stepped_scan(oxford_snapshot, start, step_s)
+    reference = prepare(oxford_snapshot, cfg)
     polar = prepare(scan, cfg).polar
     assert abs(polar.mid_sweep_s or 1.0) < 1e-3  # the image time is mid-sweep, as `yaw_at`'s 0
     before = np.array([SPEED_MPS, 0.0, np.deg2rad(RATE_BEFORE_DPS)])
@@ -98,11 +86,11 @@ def test_rate_step_deskew_follows_a_step_no_constant_twist_does(
     assert stepped.quality > flat.quality
 
 
-def test_step_candidates_keep_the_measured_yaw(snapshot: RadarFrame) -> None:
+def test_step_candidates_keep_the_measured_yaw(oxford_snapshot: RadarFrame) -> None:
     """Each candidate turns the measured yaw over the interval: the rate before up to its time,
     the rate after from there to the image time; the times lie in the sweep's first half."""
     cfg = OdometryConfig(deskew=DeskewConfig(rate_step_candidates=6))
-    polar = prepare(stepped_scan(snapshot, np.zeros(3), 0.0), cfg).polar
+    polar = prepare(stepped_scan(oxford_snapshot, np.zeros(3), 0.0), cfg).polar
     scan = PreparedScan(polar, np.array([SPEED_MPS, 0.0, 0.1]), cfg)
     before, measured, interval = np.deg2rad(5.0), np.deg2rad(12.0), 0.25
     rates = rate_search.StepRates(before, 0.0, measured, interval)
@@ -118,21 +106,21 @@ def test_step_candidates_keep_the_measured_yaw(snapshot: RadarFrame) -> None:
             assert abs(s.change_radps) == pytest.approx(np.deg2rad(60.0))
 
 
-def test_step_search_finds_the_step_by_peak_quality(snapshot: RadarFrame) -> None:
+def test_step_search_finds_the_step_by_peak_quality(oxford_snapshot: RadarFrame) -> None:
     """De-skewed at the sweep's mean yaw rate, the scan is searched: the candidate at the true
     step time (with the yaw over the interval that time implies) correlates most strongly."""
     cfg = OdometryConfig(deskew=DeskewConfig(rate_step_candidates=4))
     start = np.array([2.0, -0.4, np.deg2rad(-1.0)])
     interval = 0.25
-    probe = PreparedScan(prepare(stepped_scan(snapshot, start, 0.0), cfg).polar, None, cfg)
+    probe = PreparedScan(prepare(stepped_scan(oxford_snapshot, start, 0.0), cfg).polar, None, cfg)
     first = probe.polar.timing.first_row_s - probe.image_time_s  # type: ignore[union-attr]
     step_s = first * (1.0 - 2.5 / 4)  # the third candidate's time
-    polar = prepare(stepped_scan(snapshot, start, step_s), cfg).polar
+    polar = prepare(stepped_scan(oxford_snapshot, start, step_s), cfg).polar
     before, after = np.deg2rad(RATE_BEFORE_DPS), np.deg2rad(RATE_AFTER_DPS)
     measured = (before * (interval + step_s) + after * -step_s) / interval
     mean_rate = float(np.diff(yaw_at(np.array([-0.5, 0.5]) * SWEEP_S, step_s))[0]) / SWEEP_S
     scan = PreparedScan(polar, np.array([SPEED_MPS, 0.0, mean_rate]), cfg)
-    reference = prepare(snapshot, cfg)
+    reference = prepare(oxford_snapshot, cfg)
     estimate = register_images(reference, scan, cfg, hint=start)
     rates = rate_search.StepRates(before, 0.0, measured, interval)
     found_scan, found = rate_search.step_searched(
@@ -178,16 +166,16 @@ def test_odometry_with_the_step_search_on_real_scans(
     ],
 )
 def test_step_search_runs_only_where_its_model_holds(
-    snapshot: RadarFrame,
+    oxford_snapshot: RadarFrame,
     prior_change_dps: float,
     interval_s: float,
     measured_dps: float,
     wanted: bool,
 ) -> None:
     cfg = OdometryConfig()
-    polar = prepare(stepped_scan(snapshot, np.zeros(3), 0.0), cfg).polar
+    polar = prepare(stepped_scan(oxford_snapshot, np.zeros(3), 0.0), cfg).polar
     scan = PreparedScan(polar, np.array([SPEED_MPS, 0.0, 0.0]), cfg)
-    estimate = register_images(prepare(snapshot, cfg), scan, cfg, hint=np.zeros(3))
+    estimate = register_images(prepare(oxford_snapshot, cfg), scan, cfg, hint=np.zeros(3))
     rates = rate_search.StepRates(
         0.0, np.deg2rad(prior_change_dps), np.deg2rad(measured_dps), interval_s
     )

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,17 +25,6 @@ MAX_GT_ERROR_DEG = 0.3
 MAX_STRIDE_STEP_ERROR_M = 0.05
 """Allowed growth of the translation error per extra stride step (issue 10)."""
 SWEEP_NS = 250_000_000
-
-
-@pytest.fixture(scope="module")
-def oxford(oxford_dir: Path) -> OxfordSequence:
-    return OxfordSequence(oxford_dir)
-
-
-@pytest.fixture(scope="module")
-def scan0(oxford: OxfordSequence) -> RadarFrame:
-    """The first scan without azimuth times: an instantaneous snapshot of the world."""
-    return dataclasses.replace(oxford[0], azimuth_times_ns=None)
 
 
 def seen_from(frame: RadarFrame, pose: np.ndarray, twist: np.ndarray | None = None) -> RadarFrame:
@@ -83,27 +71,29 @@ def errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
         (1.0, -0.5, 175.0),  # past the Fourier-Mellin half-turn ambiguity
     ],
 )
-def test_known_motion_of_a_real_scan(scan0: RadarFrame, motion: tuple[float, float, float]) -> None:
+def test_known_motion_of_a_real_scan(
+    oxford_snapshot: RadarFrame, motion: tuple[float, float, float]
+) -> None:
     truth = np.array([motion[0], motion[1], np.deg2rad(motion[2])])
     defaults = OdometryConfig()
     any_turn = dataclasses.replace(  # the plausibility check is not under test here
         defaults, quality=dataclasses.replace(defaults.quality, max_yaw_rate_dps=1e4)
     )
-    estimate = estimate_motion(scan0, seen_from(scan0, truth), any_turn)
+    estimate = estimate_motion(oxford_snapshot, seen_from(oxford_snapshot, truth), any_turn)
     assert estimate.ok, estimate.reason
     err_m, err_deg = errors(estimate.motion, truth)
     assert err_m <= MAX_KNOWN_ERROR_M and err_deg <= MAX_KNOWN_ERROR_DEG, (estimate.motion, truth)
     assert np.all(np.linalg.eigvalsh(estimate.covariance) > 0)
 
 
-def test_deskew_removes_motion_distortion(scan0: RadarFrame) -> None:
+def test_deskew_removes_motion_distortion(oxford_snapshot: RadarFrame) -> None:
     """A scan taken while moving at 10 m/s and 8 deg/s is registered exactly once de-skewed."""
     truth = np.array([2.0, 0.2, np.deg2rad(1.0)])
     twist = np.array([10.0, 0.3, np.deg2rad(8.0)])
-    skewed = seen_from(scan0, truth, twist)
+    skewed = seen_from(oxford_snapshot, truth, twist)
     no_deskew = OdometryConfig(deskew=dataclasses.replace(OdometryConfig().deskew, iterations=0))
-    corrected = estimate_motion(scan0, skewed, no_deskew, twist=twist)
-    distorted = estimate_motion(scan0, skewed, no_deskew, twist=None)
+    corrected = estimate_motion(oxford_snapshot, skewed, no_deskew, twist=twist)
+    distorted = estimate_motion(oxford_snapshot, skewed, no_deskew, twist=None)
     err_m, err_deg = errors(corrected.motion, truth)
     assert err_m <= MAX_KNOWN_ERROR_M and err_deg <= MAX_KNOWN_ERROR_DEG
     assert errors(distorted.motion, truth)[0] > 2 * err_m
@@ -123,17 +113,17 @@ def test_real_consecutive_pairs_match_ground_truth(oxford: OxfordSequence) -> No
     assert worst_deg <= MAX_GT_ERROR_DEG, worst
 
 
-def test_unrelated_scans_are_flagged(oxford: OxfordSequence, scan0: RadarFrame) -> None:
+def test_unrelated_scans_are_flagged(oxford: OxfordSequence, oxford_snapshot: RadarFrame) -> None:
     rng = np.random.default_rng(0)
     noise = dataclasses.replace(
-        scan0,
-        timestamp_ns=scan0.timestamp_ns + SWEEP_NS,
-        polar=rng.integers(0, 40, scan0.polar.shape).astype(np.uint8),
+        oxford_snapshot,
+        timestamp_ns=oxford_snapshot.timestamp_ns + SWEEP_NS,
+        polar=rng.integers(0, 40, oxford_snapshot.polar.shape).astype(np.uint8),
     )
-    estimate = estimate_motion(scan0, noise)
+    estimate = estimate_motion(oxford_snapshot, noise)
     assert not estimate.ok and estimate.reason
-    blank = dataclasses.replace(noise, polar=np.zeros_like(scan0.polar))
-    assert not estimate_motion(scan0, blank).ok
+    blank = dataclasses.replace(noise, polar=np.zeros_like(oxford_snapshot.polar))
+    assert not estimate_motion(oxford_snapshot, blank).ok
 
 
 @pytest.mark.parametrize("stride", [1, 2, 3])

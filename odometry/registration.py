@@ -121,7 +121,8 @@ class PreparedScan:
         image_time_s: image time relative to the scan's reference time [s] (0 when de-skewing
             is disabled or the scan has no azimuth times).
         image_pose: (3,) T_reference_image, the image frame in the reference frame under
-            `twist` (zeros without a twist).
+            `twist` (zeros without a twist); a `rate_step` is not in it (`Odometry` moves poses
+            between image and reference time with its velocity, not with this).
         empty: nothing is left after conditioning (the scan cannot be registered).
         coarse_spectrum: packed spectrum (`odometry.packed`) of the unrotated coarse image.
         rotation_signature: Fourier-Mellin signature of the coarse image.

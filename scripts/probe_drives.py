@@ -1,0 +1,140 @@
+"""Write the stop-19 probe drives: four simulated drives nothing was ever tuned on.
+
+They differ from the named scenarios in route, town, speed and seed: a fast ring with a U-turn
+and a revisit the other way (14-18 m/s), a slow staircase of narrow streets with a three-point
+turn and reversing (6-9 m/s), three roundabouts and a revisit, and a long slow lattice drive
+(5-9 m/s, 2.3 km). Each is written in the MulRan layout under OUT/mulran/<name>, so that
+
+    python scripts/probe_drives.py --out /data/probe
+    python scripts/bench_odometry.py --data-root /data/probe --held-out mulran/probe_ring_fast ...
+    radar-slam run mulran/probe_ring_fast --data-root /data/probe --stride 4 --out RUN
+
+measure them like any sequence. They are kept out of `radar_slam.sim.scenarios` (which holds the
+CI-sized scenarios and their tests); the README reports their numbers once, as a check of the
+methods on driving they were not designed on.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+
+from radar_slam.sim.driving import PlanDrivingConfig
+from radar_slam.sim.generate import generate_sequence
+from radar_slam.sim.manoeuvres import DrivePlan, Reverse, Roundabout, Stop, TurnAround
+from radar_slam.sim.route import DrivingConfig
+from radar_slam.sim.scenarios import DAY_NS, EPOCH_NS, Scenario, Waypoints
+from radar_slam.sim.town import TownConfig
+
+_RING: Waypoints = (
+    *((0, 0), (3, 0), (3, 2), (0, 2), (0, 0)),
+    *((3, 0), (4, 0), (3, 0), (3, 2), (0, 2)),
+)
+"""Round a ring of blocks, on along its first street, a U-turn, round it again the other way."""
+_STAIRS: Waypoints = (
+    *((0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (3, 2)),
+    *((2, 2), (2, 1), (1, 1), (1, 0), (0, 0)),
+)
+"""Up a staircase of junction turns and back down it after a three-point turn."""
+_ROUNDABOUTS: Waypoints = ((0, 1), (1, 1), (1, 2), (3, 2), (3, 1), (1, 1), (1, 2), (0, 2))
+"""Three roundabouts, round a loop of blocks and through the first junctions again."""
+_LATTICE: Waypoints = (
+    *((1, 1), (4, 1), (4, 3), (1, 3), (1, 1)),
+    *((4, 1), (4, 3), (6, 3), (6, 1), (4, 1)),
+)
+"""A loop of blocks twice in the same direction, then a block beyond it (no revisit there)."""
+
+
+WIDE = (6.8, 7.6)
+NARROW = (4.8, 5.4)
+"""Half-widths of the carriageways [m]: room for a U-turn; a three-point turn needed."""
+
+
+def _plan_town(
+    blocks: tuple[int, int],
+    sizes: tuple[float, float],
+    half_width: tuple[float, float],
+    sidewalk: tuple[float, float] | None = None,
+) -> TownConfig:
+    """A town with straight streets (drive plans need them)."""
+    town = TownConfig(
+        n_blocks=blocks, block_size_m=sizes, warp_amplitude_m=0.0, road_half_width_m=half_width
+    )
+    return town if sidewalk is None else replace(town, sidewalk_m=sidewalk)
+
+
+def _probe(name: str, seed: int, day: int, route: Waypoints, town: TownConfig) -> Scenario:
+    return Scenario(
+        name=name,
+        description=f"stop-19 probe drive {name}",
+        seed=seed,
+        waypoints=route,
+        town_routes=(route,),
+        start_ns=EPOCH_NS + day * DAY_NS,
+        town=town,
+        held_out=True,
+    )
+
+
+PROBES: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        replace(
+            _probe("probe_ring_fast", 71, 40, _RING, _plan_town((5, 3), (90.0, 140.0), WIDE)),
+            plan=DrivePlan(
+                events=(Stop(2, 12.0), TurnAround(14, "u_turn", 50.0), Stop(17, 5.0)),
+                driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(14.0, 18.0)),
+            ),
+        ),
+        replace(
+            _probe("probe_stairs_slow", 72, 41, _STAIRS, _plan_town((4, 4), (50.0, 75.0), NARROW)),
+            plan=DrivePlan(
+                events=(
+                    Stop(1, 15.0),
+                    TurnAround(5, "three_point", 30.0),
+                    Reverse(7, 38.0, 25.0),
+                    Stop(9, 6.0),
+                ),
+                driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(6.0, 9.0)),
+            ),
+        ),
+        replace(
+            _probe(
+                "probe_roundabouts",
+                73,
+                42,
+                _ROUNDABOUTS,
+                _plan_town((4, 3), (80.0, 110.0), WIDE, sidewalk=(3.5, 5.0)),
+            ),
+            plan=DrivePlan(
+                events=(Roundabout(2), Roundabout(4), Stop(6, 8.0), Roundabout(7)),
+                driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(11.0, 14.0)),
+            ),
+        ),
+        replace(
+            _probe("probe_lattice_slow", 74, 43, _LATTICE, TownConfig(n_blocks=(7, 4))),
+            driving=DrivingConfig(cruise_speed_mps=(5.0, 9.0)),
+        ),
+    )
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, required=True, help="data root to write into")
+    parser.add_argument(
+        "--only", action="append", choices=sorted(PROBES), help="write only this drive"
+    )
+    parser.add_argument("--workers", type=int, default=2, help="rendering processes")
+    args = parser.parse_args()
+    for name in args.only or sorted(PROBES):
+        folder = args.out / "mulran" / name
+        if folder.exists() and any(folder.iterdir()):
+            parser.error(f"{folder} exists and is not empty; remove it first")
+        made = generate_sequence(PROBES[name], folder, workers=args.workers)
+        print(f"{name}: {made.n_frames} scans, {made.length_m:.0f} m -> {folder}")
+
+
+if __name__ == "__main__":
+    main()

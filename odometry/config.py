@@ -312,9 +312,12 @@ class DeskewConfig:
             quality measures the sweep's yaw rate relative to the reference image's de-skew, so it
             matches the two images' distortions rather than finding the true yaw rate
             (docs/odometry_notes.md, issue 10y).
-        yaw_rate_search_min_interval_s: the search runs only when the time between the two
-            image frames is at least this [s] (1 Hz; at 4 Hz it is 0.25 s, at 2 Hz 0.5 s) and the
-            yaw-rate trend and the kept de-skew disagree (by more than the re-de-skew limits).
+        yaw_rate_search_min_interval_s: the search runs at every scan whose image frame is at
+            least this long [s] after the last one (a low frame rate: 1 Hz; at 4 Hz it is
+            0.25 s, at 2 Hz 0.5 s), `yaw_rate_search_slow_rounds` rounds ...
+        yaw_rate_search_slow_rounds: ... each round around the yaw rate the last one moved to
+            (with a reference de-skewed right, three rounds put the sweep's rate within 2-3
+            deg/s rms on the simulator; docs/odometry_notes.md, stop 19).
         yaw_rate_search_min_gain: a searched de-skew replaces the kept one only when its peak
             quality is higher by more than this fraction.
         yaw_rate_search_weak_fraction: the search also runs, at any interval, on a registration
@@ -323,6 +326,11 @@ class DeskewConfig:
         yaw_rate_search_weak_rounds: rounds of search for such a weak registration, each around
             the yaw rate the last one moved to (the vertex of one round reaches three half-widths;
             three rounds reach further but did worse at a rate nothing was tuned at, stop 15).
+        keyframe_rate_change: at low frame rates (as above), a new keyframe registered against
+            the previous scan is re-rendered at the mean yaw rate since that scan's image plus
+            half the change of the rate its search measured against that scan
+            (`odometry.rate_search.keyframe_yaw_rate`); False: at the velocity as measured (the
+            mean, with the yaw-rate trend), as at higher rates.
         rate_step_candidates: in `Odometry`, a scan whose mean yaw rate since the previous image
             is `rate_step_min_dps` or more from the previous step's is also de-skewed with a step of
             the yaw rate at this many times spread over the first half of its sweep
@@ -350,6 +358,8 @@ class DeskewConfig:
     yaw_rate_search_min_gain: float = 0.05
     yaw_rate_search_weak_fraction: float = 0.5
     yaw_rate_search_weak_rounds: int = 1
+    yaw_rate_search_slow_rounds: int = 3
+    keyframe_rate_change: bool = True
     rate_step_candidates: int = 8
     rate_step_min_dps: float = 3.0
     rate_step_min_gain: float = 0.05
@@ -367,6 +377,7 @@ class DeskewConfig:
             "yaw_rate_search_weak_fraction", self.yaw_rate_search_weak_fraction, 0.0, 1.0
         )
         checks.at_least("yaw_rate_search_weak_rounds", self.yaw_rate_search_weak_rounds, 1)
+        checks.at_least("yaw_rate_search_slow_rounds", self.yaw_rate_search_slow_rounds, 1)
         checks.at_least("rate_step_candidates", self.rate_step_candidates, 0)
         checks.non_negative("rate_step_min_dps", self.rate_step_min_dps)
         checks.non_negative("rate_step_min_gain", self.rate_step_min_gain)

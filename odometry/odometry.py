@@ -304,6 +304,7 @@ class Odometry:
             base.scan, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
         image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
+        searched_from = None
         # A motion faster than a vehicle moves, or across a gap that hid more than the
         # prediction allows, is no velocity: the one from before is kept (recovery.py).
         measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
@@ -318,6 +319,9 @@ class Odometry:
             change = self._update_velocity(base, scan, image_pose, interval_s)
             if before is not None and base is previous and not previous.gap:
                 self._revise(previous, before)
+            slow = rate_search.searched_slowly(interval_s, self.config)
+            if slow and reference is base and not base.gap and reference.scan.twist is not None:
+                searched_from = reference.scan  # the keyframe's yaw rate is measured against it
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
@@ -336,7 +340,7 @@ class Odometry:
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = self._refreshed(node.scan)
+            node.scan = self._refreshed(node.scan, searched_from)
             state.earlier_keyframes = recovery.remembered_keyframes(
                 state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
             )
@@ -344,7 +348,7 @@ class Odometry:
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = self._refreshed(keyframe.scan)
+                keyframe.scan = self._refreshed(keyframe.scan, None)
         state.previous = state.last_registered = node
         return self._record(
             node,
@@ -423,9 +427,9 @@ class Odometry:
         where the search is wanted (`rate_search.rounds_wanted`: low frame rates, weak peaks)."""
         if self._state.velocity is None:
             return scan, estimate
-        trend, cfg = self._velocity_at(image_time_ns(scan)), self.config
+        cfg = self.config
         last = self._state.history[len(self._state.history) - 1].quality
-        rounds = rate_search.rounds_wanted(scan, estimate, trend, interval_s, last, cfg)
+        rounds = rate_search.rounds_wanted(scan, estimate, interval_s, last, cfg)
         if rounds == 0:
             return scan, estimate
         return rate_search.searched(reference.scan, scan, estimate, cfg, register_images, rounds)
@@ -535,14 +539,23 @@ class Odometry:
             or keyframe.frames + 1 >= kcfg.max_frames
         )
 
-    def _refreshed(self, scan: PreparedScan) -> PreparedScan:
-        """Re-render a new keyframe whose de-skew velocity is stale (e.g. the first scans)."""
-        velocity = self._state.velocity
-        if velocity is None or not self.config.deskew.enabled or scan.polar.timing is None:
+    def _refreshed(self, scan: PreparedScan, searched_from: PreparedScan | None) -> PreparedScan:
+        """Re-render a new keyframe whose de-skew velocity is stale (e.g. the first scans). With
+        `searched_from`, the previous image the keyframe's de-skew yaw rate was searched against
+        at a low frame rate (the velocity measured since it), the yaw rate is
+        `rate_search.keyframe_yaw_rate`."""
+        velocity, dcfg = self._state.velocity, self.config.deskew
+        if velocity is None or not dcfg.enabled or scan.polar.timing is None:
             return scan
         new = self._velocity_at(image_time_ns(scan))
         if scan.rate_step is not None or (scan.twist is not None and close_twists(new, scan.twist)):
             return scan  # a rate step was chosen by the images, not the velocity
+        if dcfg.keyframe_rate_change and searched_from is not None and scan.twist is not None:
+            assert searched_from.twist is not None
+            new = new.copy()
+            new[2] = rate_search.keyframe_yaw_rate(
+                float(velocity.twist[2]), float(scan.twist[2]), float(searched_from.twist[2])
+            )
         return PreparedScan(scan.polar, new, self.config)
 
     def _trend_hypothesis(

@@ -6,12 +6,20 @@ of yaw rates and registered against the same reference, the peak quality is high
 scan's de-skew matches the reference image's: it measures the sweep's yaw rate *relative to the
 reference's de-skew* (its error follows the reference's de-skew error), not the true one. Both
 images distorted alike register to a better relative motion than one distorted and one right
-(docs/odometry_notes.md, issue 10y), which is what this search buys. It runs only where it can
-matter: a long interval between the image frames and a yaw-rate trend that disagrees with the kept
-de-skew, or a registration whose peak is far weaker than the previous scan's. The second is how a
-de-skew far off shows at any rate: at 2 Hz, leaving a U-turn through a reversal from +30 to -30
-deg/s, the scan de-skewed at +28 deg/s correlated at a quarter of the previous peak and took an
-8 deg wrong turn; searched, it registers within 1.5 deg (`DeskewConfig.yaw_rate_search_*`).
+(docs/odometry_notes.md, issue 10y), which is what this search buys. It runs where it can matter:
+at every scan of a low frame rate (a long interval between the image frames), and on a
+registration whose peak is far weaker than the previous scan's. The second is how a de-skew far
+off shows at any rate: at 2 Hz, leaving a U-turn through a reversal from +30 to -30 deg/s, the
+scan de-skewed at +28 deg/s correlated at a quarter of the previous peak and took an 8 deg wrong
+turn; searched, it registers within 1.5 deg (`DeskewConfig.yaw_rate_search_*`).
+
+Because the search measures a rate relative to the reference's, a new keyframe at a low frame
+rate is not re-rendered at what the search found, nor at the mean yaw rate since the previous
+image (a 1 s mean misses a curvature change inside the second), but at `keyframe_yaw_rate`: that
+mean plus half the change between the two sweeps' rates that the search measured. The yaw step
+between the two images gives the sum of the two sweeps' rates, the search their difference, so
+the keyframe's rate is absolute, and the next scan's search matches it (docs/odometry_notes.md,
+stop 19).
 
 `step_searched` goes one step further where the yaw rate changed: a curvature step inside a sweep
 is a step of the yaw rate, which no constant de-skew follows (both sides of the step turn the
@@ -33,7 +41,7 @@ from numpy.typing import NDArray
 from odometry.config import OdometryConfig
 from odometry.deskew import RateStep
 from odometry.registration import MotionEstimate, PreparedScan
-from odometry.velocity import REDESKEW_MPS, REDESKEW_RADPS, bounded_twist, close_twists
+from odometry.velocity import bounded_twist
 
 FloatArray = NDArray[np.float64]
 Register = Callable[..., MotionEstimate]
@@ -47,28 +55,51 @@ MIN_VERTEX_OFFSET = 0.25
 def rounds_wanted(
     scan: PreparedScan,
     estimate: MotionEstimate,
-    trend: FloatArray,
     interval_s: float,
     last_quality: float,
     cfg: OdometryConfig,
 ) -> int:
     """How many rounds of search `scan`'s de-skew yaw rate gets (0: none). Only a de-skewed,
-    registered scan (`estimate`) is searched, and only while the search is on:
+    registered scan (`estimate`) is searched, and only while the search is on; the larger of:
 
     - its peak is weak, below `DeskewConfig.yaw_rate_search_weak_fraction` of the previous
       scan's (`last_quality`; a de-skew far off, at any frame rate):
       `yaw_rate_search_weak_rounds` rounds;
     - its image frame is `interval_s` [s] after the last one, at least
-      `yaw_rate_search_min_interval_s`, and the twist with the yaw-rate trend (`trend`, (3,))
-      is off the kept de-skew by more than the re-de-skew limits: one round.
+      `yaw_rate_search_min_interval_s` (a low frame rate): `yaw_rate_search_slow_rounds` rounds.
     """
     dcfg = cfg.deskew
     if dcfg.yaw_rate_search_dps <= 0.0 or scan.twist is None or not estimate.ok:
         return 0
+    rounds = 0
     if estimate.quality < dcfg.yaw_rate_search_weak_fraction * last_quality:
-        return dcfg.yaw_rate_search_weak_rounds
-    slow = interval_s >= dcfg.yaw_rate_search_min_interval_s
-    return int(slow and not close_twists(trend, scan.twist, REDESKEW_MPS, REDESKEW_RADPS))
+        rounds = dcfg.yaw_rate_search_weak_rounds
+    if searched_slowly(interval_s, cfg):
+        rounds = max(rounds, dcfg.yaw_rate_search_slow_rounds)
+    return rounds
+
+
+def searched_slowly(interval_s: float, cfg: OdometryConfig) -> bool:
+    """Whether a scan `interval_s` [s] after its reference image has its de-skew yaw rate
+    searched as at a low frame rate (`rounds_wanted`)."""
+    dcfg = cfg.deskew
+    return dcfg.yaw_rate_search_dps > 0.0 and interval_s >= dcfg.yaw_rate_search_min_interval_s
+
+
+def keyframe_yaw_rate(mean_rate: float, searched_rate: float, reference_rate: float) -> float:
+    """The de-skew yaw rate [rad/s] of a new keyframe at a low frame rate.
+
+    Args:
+        mean_rate: the mean yaw rate between the reference's image and the keyframe's [rad/s].
+        searched_rate: the keyframe's de-skew yaw rate as its search against the reference left
+            it [rad/s] ...
+        reference_rate: ... and the reference's [rad/s]; their difference is the change of the
+            yaw rate from one sweep to the other (the search matches the two distortions).
+
+    With the yaw rate linear in time between the two sweeps, the mean is the average of their
+    rates; half the measured change on top of it is the keyframe's sweep rate.
+    """
+    return mean_rate + 0.5 * (searched_rate - reference_rate)
 
 
 def vertex_offset(qualities: tuple[float, float, float]) -> float | None:

@@ -24,7 +24,7 @@ from radar_slam.sim.driving import PlanDrivingConfig
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.manoeuvres import DrivePlan, Reverse, Roundabout, Stop, TurnAround
 from radar_slam.sim.route import DrivingConfig
-from radar_slam.sim.scenarios import DAY_NS, EPOCH_NS, Scenario, Waypoints
+from radar_slam.sim.scenarios import DAY_NS, EPOCH_NS, Scenario, Waypoints, plan_town
 from radar_slam.sim.town import TownConfig
 
 _RING: Waypoints = (
@@ -46,22 +46,9 @@ _LATTICE: Waypoints = (
 """A loop of blocks twice in the same direction, then a block beyond it (no revisit there)."""
 
 
-WIDE = (6.8, 7.6)
-NARROW = (4.8, 5.4)
-"""Half-widths of the carriageways [m]: room for a U-turn; a three-point turn needed."""
-
-
-def _plan_town(
-    blocks: tuple[int, int],
-    sizes: tuple[float, float],
-    half_width: tuple[float, float],
-    sidewalk: tuple[float, float] | None = None,
-) -> TownConfig:
-    """A town with straight streets (drive plans need them)."""
-    town = TownConfig(
-        n_blocks=blocks, block_size_m=sizes, warp_amplitude_m=0.0, road_half_width_m=half_width
-    )
-    return town if sidewalk is None else replace(town, sidewalk_m=sidewalk)
+WIDE = {"road_half_width_m": (6.8, 7.6)}
+NARROW = {"road_half_width_m": (4.8, 5.4)}
+"""Carriageways with room for a U-turn; narrow enough to need a three-point turn."""
 
 
 def _probe(name: str, seed: int, day: int, route: Waypoints, town: TownConfig) -> Scenario:
@@ -81,14 +68,26 @@ PROBES: dict[str, Scenario] = {
     s.name: s
     for s in (
         replace(
-            _probe("probe_ring_fast", 71, 40, _RING, _plan_town((5, 3), (90.0, 140.0), WIDE)),
+            _probe(
+                "probe_ring_fast",
+                71,
+                40,
+                _RING,
+                plan_town(n_blocks=(5, 3), block_size_m=(90.0, 140.0), **WIDE),
+            ),
             plan=DrivePlan(
                 events=(Stop(2, 12.0), TurnAround(14, "u_turn", 50.0), Stop(17, 5.0)),
                 driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(14.0, 18.0)),
             ),
         ),
         replace(
-            _probe("probe_stairs_slow", 72, 41, _STAIRS, _plan_town((4, 4), (50.0, 75.0), NARROW)),
+            _probe(
+                "probe_stairs_slow",
+                72,
+                41,
+                _STAIRS,
+                plan_town(n_blocks=(4, 4), block_size_m=(50.0, 75.0), **NARROW),
+            ),
             plan=DrivePlan(
                 events=(
                     Stop(1, 15.0),
@@ -105,7 +104,9 @@ PROBES: dict[str, Scenario] = {
                 73,
                 42,
                 _ROUNDABOUTS,
-                _plan_town((4, 3), (80.0, 110.0), WIDE, sidewalk=(3.5, 5.0)),
+                plan_town(
+                    n_blocks=(4, 3), block_size_m=(80.0, 110.0), sidewalk_m=(3.5, 5.0), **WIDE
+                ),
             ),
             plan=DrivePlan(
                 events=(Roundabout(2), Roundabout(4), Stop(6, 8.0), Roundabout(7)),

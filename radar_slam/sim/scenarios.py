@@ -346,7 +346,7 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
 """Session pairs for maps (issue-13): a reverse-direction pair and its reduced-bin version."""
 
 
-def _plan_town(**overrides: Any) -> TownConfig:
+def plan_town(**overrides: Any) -> TownConfig:
     """A town with straight streets (plans need them) of 70-110 m blocks, 4 x 3 of them."""
     return TownConfig(
         **{"n_blocks": (4, 3), "block_size_m": (70.0, 110.0), "warp_amplitude_m": 0.0, **overrides}
@@ -460,7 +460,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_U_TURN_ROUTE,
         town_routes=(_U_TURN_ROUTE,),
         start_ns=EPOCH_NS + 8 * DAY_NS,
-        town=_plan_town(**_WIDE_STREETS),
+        town=plan_town(**_WIDE_STREETS),
         plan=DrivePlan(events=(TurnAround(3, "u_turn", 40.0),)),
     ),
     Scenario(
@@ -471,7 +471,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_THREE_POINT_ROUTE,
         town_routes=(_THREE_POINT_ROUTE,),
         start_ns=EPOCH_NS + 9 * DAY_NS,
-        town=_plan_town(**_NARROW_STREETS),
+        town=plan_town(**_NARROW_STREETS),
         plan=DrivePlan(events=(TurnAround(2, "three_point", 35.0),)),
     ),
     Scenario(
@@ -481,7 +481,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_ROUNDABOUT_ROUTE,
         town_routes=(_ROUNDABOUT_ROUTE,),
         start_ns=EPOCH_NS + 10 * DAY_NS,
-        town=_plan_town(**_OPEN_JUNCTIONS),
+        town=plan_town(**_OPEN_JUNCTIONS),
         plan=DrivePlan(events=(Roundabout(2),)),
     ),
     Scenario(
@@ -491,7 +491,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_STOP_AND_GO_ROUTE,
         town_routes=(_STOP_AND_GO_ROUTE,),
         start_ns=EPOCH_NS + 11 * DAY_NS,
-        town=_plan_town(),
+        town=plan_town(),
         plan=DrivePlan(
             events=(Stop(1, 10.0), Stop(2, 3.0), Stop(3, 10.0)),
             driving=PlanDrivingConfig(accel_mps2=3.0, decel_mps2=3.0),
@@ -505,7 +505,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_JUNCTION_ROUTE,
         town_routes=(_JUNCTION_ROUTE,),
         start_ns=EPOCH_NS + 12 * DAY_NS,
-        town=_plan_town(),
+        town=plan_town(),
         plan=DrivePlan(driving=PlanDrivingConfig(cruise_speed_mps=(12.0, 14.0))),
     ),
     Scenario(
@@ -515,7 +515,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_REVERSE_GEAR_ROUTE,
         town_routes=(_REVERSE_GEAR_ROUTE,),
         start_ns=EPOCH_NS + 13 * DAY_NS,
-        town=_plan_town(),
+        town=plan_town(),
         plan=DrivePlan(events=(Reverse(1, 60.0, 30.0),)),
     ),
     Scenario(
@@ -526,7 +526,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_ROUNDABOUTS_ROUTE,
         town_routes=(_ROUNDABOUTS_ROUTE,),
         start_ns=EPOCH_NS + 17 * DAY_NS,
-        town=_plan_town(**_OPEN_JUNCTIONS),
+        town=plan_town(**_OPEN_JUNCTIONS),
         plan=DrivePlan(
             events=tuple(Roundabout(node) for node in range(1, 7)),
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(12.0, 14.0)),
@@ -540,7 +540,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_TOWN_ROUTE,
         town_routes=(_HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 14 * DAY_NS,
-        town=_plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
         plan=DrivePlan(
             events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(cruise_speed_mps=(11.0, 14.0)),
@@ -555,7 +555,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_MIXED_ROUTE,
         town_routes=(_HELD_OUT_MIXED_ROUTE,),
         start_ns=EPOCH_NS + 15 * DAY_NS,
-        town=_plan_town(n_blocks=(5, 4), block_size_m=(80.0, 120.0), **_OPEN_JUNCTIONS),
+        town=plan_town(n_blocks=(5, 4), block_size_m=(80.0, 120.0), **_OPEN_JUNCTIONS),
         plan=DrivePlan(
             events=(
                 Stop(1, 10.0),
@@ -577,7 +577,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_JUNCTIONS_ROUTE,
         town_routes=(_HELD_OUT_JUNCTIONS_ROUTE,),
         start_ns=EPOCH_NS + 16 * DAY_NS,
-        town=_plan_town(n_blocks=(5, 5), block_size_m=(70.0, 90.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), block_size_m=(70.0, 90.0), **_WIDE_STREETS),
         plan=DrivePlan(
             events=(
                 Stop(2, 6.0),
@@ -597,7 +597,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_REVISITS_ROUTE,
         town_routes=(_HELD_OUT_REVISITS_ROUTE,),
         start_ns=EPOCH_NS + 18 * DAY_NS,
-        town=_plan_town(n_blocks=(4, 4), block_size_m=(60.0, 100.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(4, 4), block_size_m=(60.0, 100.0), **_WIDE_STREETS),
         plan=DrivePlan(
             events=(Stop(3, 8.0), TurnAround(11, "u_turn", 40.0), Stop(15, 6.0)),
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(12.0, 14.0)),
@@ -612,7 +612,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_TOWN_ROUTE,
         town_routes=(_HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 19 * DAY_NS,
-        town=_plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
         plan=DrivePlan(
             events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(16.0, 20.0)),

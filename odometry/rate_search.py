@@ -18,8 +18,8 @@ rate is not re-rendered at what the search found, nor at the mean yaw rate since
 image (a 1 s mean misses a curvature change inside the second), but at `keyframe_yaw_rate`: that
 mean plus half the change between the two sweeps' rates that the search measured. The yaw step
 between the two images gives the sum of the two sweeps' rates, the search their difference, so
-the keyframe's rate is absolute, and the next scan's search matches it (docs/odometry_notes.md,
-stop 19).
+the keyframe's rate does not carry the reference's error (where the yaw rate is linear between
+the two sweeps), and the next scan's search matches it (docs/odometry_notes.md, stop 19).
 
 `step_searched` goes one step further where the yaw rate changed: a curvature step inside a sweep
 is a step of the yaw rate, which no constant de-skew follows (both sides of the step turn the

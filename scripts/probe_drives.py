@@ -17,14 +17,22 @@ methods on driving they were not designed on.
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from radar_slam.sim.driving import PlanDrivingConfig
 from radar_slam.sim.generate import generate_sequence
 from radar_slam.sim.manoeuvres import DrivePlan, Reverse, Roundabout, Stop, TurnAround
 from radar_slam.sim.route import DrivingConfig
-from radar_slam.sim.scenarios import DAY_NS, EPOCH_NS, Scenario, Waypoints, plan_town
+from radar_slam.sim.scenarios import (
+    DAY_NS,
+    EPOCH_NS,
+    NARROW_STREETS,
+    OPEN_JUNCTIONS,
+    WIDE_STREETS,
+    Scenario,
+    Waypoints,
+    plan_town,
+)
 from radar_slam.sim.town import TownConfig
 
 _RING: Waypoints = (
@@ -46,12 +54,15 @@ _LATTICE: Waypoints = (
 """A loop of blocks twice in the same direction, then a block beyond it (no revisit there)."""
 
 
-WIDE = {"road_half_width_m": (6.8, 7.6)}
-NARROW = {"road_half_width_m": (4.8, 5.4)}
-"""Carriageways with room for a U-turn; narrow enough to need a three-point turn."""
-
-
-def _probe(name: str, seed: int, day: int, route: Waypoints, town: TownConfig) -> Scenario:
+def _probe(
+    name: str,
+    seed: int,
+    day: int,
+    route: Waypoints,
+    town: TownConfig,
+    plan: DrivePlan | None = None,
+    driving: DrivingConfig | None = None,
+) -> Scenario:
     return Scenario(
         name=name,
         description=f"stop-19 probe drive {name}",
@@ -60,6 +71,8 @@ def _probe(name: str, seed: int, day: int, route: Waypoints, town: TownConfig) -
         town_routes=(route,),
         start_ns=EPOCH_NS + day * DAY_NS,
         town=town,
+        driving=DrivingConfig() if driving is None else driving,
+        plan=plan,
         held_out=True,
     )
 
@@ -67,28 +80,24 @@ def _probe(name: str, seed: int, day: int, route: Waypoints, town: TownConfig) -
 PROBES: dict[str, Scenario] = {
     s.name: s
     for s in (
-        replace(
-            _probe(
-                "probe_ring_fast",
-                71,
-                40,
-                _RING,
-                plan_town(n_blocks=(5, 3), block_size_m=(90.0, 140.0), **WIDE),
-            ),
-            plan=DrivePlan(
+        _probe(
+            "probe_ring_fast",
+            71,
+            40,
+            _RING,
+            plan_town(n_blocks=(5, 3), block_size_m=(90.0, 140.0), **WIDE_STREETS),
+            DrivePlan(
                 events=(Stop(2, 12.0), TurnAround(14, "u_turn", 50.0), Stop(17, 5.0)),
                 driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(14.0, 18.0)),
             ),
         ),
-        replace(
-            _probe(
-                "probe_stairs_slow",
-                72,
-                41,
-                _STAIRS,
-                plan_town(n_blocks=(4, 4), block_size_m=(50.0, 75.0), **NARROW),
-            ),
-            plan=DrivePlan(
+        _probe(
+            "probe_stairs_slow",
+            72,
+            41,
+            _STAIRS,
+            plan_town(n_blocks=(4, 4), block_size_m=(50.0, 75.0), **NARROW_STREETS),
+            DrivePlan(
                 events=(
                     Stop(1, 15.0),
                     TurnAround(5, "three_point", 30.0),
@@ -98,23 +107,23 @@ PROBES: dict[str, Scenario] = {
                 driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(6.0, 9.0)),
             ),
         ),
-        replace(
-            _probe(
-                "probe_roundabouts",
-                73,
-                42,
-                _ROUNDABOUTS,
-                plan_town(
-                    n_blocks=(4, 3), block_size_m=(80.0, 110.0), sidewalk_m=(3.5, 5.0), **WIDE
-                ),
-            ),
-            plan=DrivePlan(
+        _probe(
+            "probe_roundabouts",
+            73,
+            42,
+            _ROUNDABOUTS,
+            plan_town(n_blocks=(4, 3), block_size_m=(80.0, 110.0), **OPEN_JUNCTIONS),
+            DrivePlan(
                 events=(Roundabout(2), Roundabout(4), Stop(6, 8.0), Roundabout(7)),
                 driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(11.0, 14.0)),
             ),
         ),
-        replace(
-            _probe("probe_lattice_slow", 74, 43, _LATTICE, TownConfig(n_blocks=(7, 4))),
+        _probe(
+            "probe_lattice_slow",
+            74,
+            43,
+            _LATTICE,
+            TownConfig(n_blocks=(7, 4)),
             driving=DrivingConfig(cruise_speed_mps=(5.0, 9.0)),
         ),
     )

@@ -353,11 +353,11 @@ def plan_town(**overrides: Any) -> TownConfig:
     )
 
 
-_WIDE_STREETS = {"road_half_width_m": (6.8, 7.6)}
+WIDE_STREETS = {"road_half_width_m": (6.8, 7.6)}
 """Carriageways wide enough for a U-turn at full lock."""
-_OPEN_JUNCTIONS = {"road_half_width_m": (6.8, 7.6), "sidewalk_m": (3.5, 5.0)}
+OPEN_JUNCTIONS = {"road_half_width_m": (6.8, 7.6), "sidewalk_m": (3.5, 5.0)}
 """Junctions with room for a roundabout (building lines >= 11 m from the street centre)."""
-_NARROW_STREETS = {"road_half_width_m": (4.8, 5.4)}
+NARROW_STREETS = {"road_half_width_m": (4.8, 5.4)}
 """Carriageways that need a three-point turn."""
 _TURN_AROUND_ROUTE: Waypoints = ((1, 1), (2, 1), (3, 1), (3, 2), (2, 2), (2, 1), (1, 1), (0, 1))
 _U_TURN_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (3, 1), (2, 1), (1, 1))
@@ -460,7 +460,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_U_TURN_ROUTE,
         town_routes=(_U_TURN_ROUTE,),
         start_ns=EPOCH_NS + 8 * DAY_NS,
-        town=plan_town(**_WIDE_STREETS),
+        town=plan_town(**WIDE_STREETS),
         plan=DrivePlan(events=(TurnAround(3, "u_turn", 40.0),)),
     ),
     Scenario(
@@ -471,7 +471,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_THREE_POINT_ROUTE,
         town_routes=(_THREE_POINT_ROUTE,),
         start_ns=EPOCH_NS + 9 * DAY_NS,
-        town=plan_town(**_NARROW_STREETS),
+        town=plan_town(**NARROW_STREETS),
         plan=DrivePlan(events=(TurnAround(2, "three_point", 35.0),)),
     ),
     Scenario(
@@ -481,7 +481,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_ROUNDABOUT_ROUTE,
         town_routes=(_ROUNDABOUT_ROUTE,),
         start_ns=EPOCH_NS + 10 * DAY_NS,
-        town=plan_town(**_OPEN_JUNCTIONS),
+        town=plan_town(**OPEN_JUNCTIONS),
         plan=DrivePlan(events=(Roundabout(2),)),
     ),
     Scenario(
@@ -526,7 +526,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_ROUNDABOUTS_ROUTE,
         town_routes=(_ROUNDABOUTS_ROUTE,),
         start_ns=EPOCH_NS + 17 * DAY_NS,
-        town=plan_town(**_OPEN_JUNCTIONS),
+        town=plan_town(**OPEN_JUNCTIONS),
         plan=DrivePlan(
             events=tuple(Roundabout(node) for node in range(1, 7)),
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(12.0, 14.0)),
@@ -540,7 +540,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_TOWN_ROUTE,
         town_routes=(_HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 14 * DAY_NS,
-        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **WIDE_STREETS),
         plan=DrivePlan(
             events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(cruise_speed_mps=(11.0, 14.0)),
@@ -555,7 +555,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_MIXED_ROUTE,
         town_routes=(_HELD_OUT_MIXED_ROUTE,),
         start_ns=EPOCH_NS + 15 * DAY_NS,
-        town=plan_town(n_blocks=(5, 4), block_size_m=(80.0, 120.0), **_OPEN_JUNCTIONS),
+        town=plan_town(n_blocks=(5, 4), block_size_m=(80.0, 120.0), **OPEN_JUNCTIONS),
         plan=DrivePlan(
             events=(
                 Stop(1, 10.0),
@@ -577,7 +577,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_JUNCTIONS_ROUTE,
         town_routes=(_HELD_OUT_JUNCTIONS_ROUTE,),
         start_ns=EPOCH_NS + 16 * DAY_NS,
-        town=plan_town(n_blocks=(5, 5), block_size_m=(70.0, 90.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), block_size_m=(70.0, 90.0), **WIDE_STREETS),
         plan=DrivePlan(
             events=(
                 Stop(2, 6.0),
@@ -597,7 +597,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_REVISITS_ROUTE,
         town_routes=(_HELD_OUT_REVISITS_ROUTE,),
         start_ns=EPOCH_NS + 18 * DAY_NS,
-        town=plan_town(n_blocks=(4, 4), block_size_m=(60.0, 100.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(4, 4), block_size_m=(60.0, 100.0), **WIDE_STREETS),
         plan=DrivePlan(
             events=(Stop(3, 8.0), TurnAround(11, "u_turn", 40.0), Stop(15, 6.0)),
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(12.0, 14.0)),
@@ -612,7 +612,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=_HELD_OUT_TOWN_ROUTE,
         town_routes=(_HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 19 * DAY_NS,
-        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **_WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **WIDE_STREETS),
         plan=DrivePlan(
             events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(16.0, 20.0)),

@@ -326,11 +326,12 @@ class DeskewConfig:
         yaw_rate_search_weak_rounds: rounds of search for such a weak registration, each around
             the yaw rate the last one moved to (the vertex of one round reaches three half-widths;
             three rounds reach further but did worse at a rate nothing was tuned at, stop 15).
-        keyframe_rate_change: at low frame rates (as above), a new keyframe registered against
-            the previous scan is re-rendered at the mean yaw rate since that scan's image plus
-            half the change of the rate its search measured against that scan
-            (`odometry.rate_search.keyframe_yaw_rate`); False: at the velocity as measured (the
-            mean, with the yaw-rate trend), as at higher rates.
+        keyframe_rate_change: at low frame rates (as above), a new keyframe is re-rendered at
+            the mean yaw rate since the previous scan's image plus half the change of the rate
+            between the two sweeps that their searches measured (against the previous scan, or
+            against the keyframe both registered to; `odometry.rate_search.keyframe_yaw_rate`);
+            False: at the velocity as measured (the mean, with the yaw-rate trend), as at
+            higher rates.
         rate_step_candidates: in `Odometry`, a scan whose mean yaw rate since the previous image
             is `rate_step_min_dps` or more from the previous step's is also de-skewed with a step of
             the yaw rate at this many times spread over the first half of its sweep

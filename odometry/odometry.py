@@ -304,7 +304,7 @@ class Odometry:
             base.scan, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
         image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
-        searched_from = None
+        keyframe_rate, rate_reference = None, None
         # A motion faster than a vehicle moves, or across a gap that hid more than the
         # prediction allows, is no velocity: the one from before is kept (recovery.py).
         measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
@@ -319,9 +319,9 @@ class Odometry:
             change = self._update_velocity(base, scan, image_pose, interval_s)
             if before is not None and base is previous and not previous.gap:
                 self._revise(previous, before)
-            slow = rate_search.searched_slowly(interval_s, self.config)
-            if slow and reference is base and not base.gap and reference.scan.twist is not None:
-                searched_from = reference.scan  # the keyframe's yaw rate is measured against it
+            if rate_search.searched_slowly(interval_s, self.config):
+                rate_reference = reference.index
+                keyframe_rate = self._keyframe_rate(reference, base, scan)
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
@@ -334,13 +334,14 @@ class Odometry:
             conversion_covariance=conversion_covariance(
                 estimate.covariance, change, scan.image_time_s, interval_s, self.config.quality
             ),
+            rate_reference=rate_reference,
         )
         covariance = self._factor_covariance(
             previous, reference, node, estimate, change, interval_s
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = self._refreshed(node.scan, searched_from)
+            node.scan = self._refreshed(node.scan, keyframe_rate)
             state.earlier_keyframes = recovery.remembered_keyframes(
                 state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
             )
@@ -539,23 +540,35 @@ class Odometry:
             or keyframe.frames + 1 >= kcfg.max_frames
         )
 
-    def _refreshed(self, scan: PreparedScan, searched_from: PreparedScan | None) -> PreparedScan:
-        """Re-render a new keyframe whose de-skew velocity is stale (e.g. the first scans). With
-        `searched_from`, the previous image the keyframe's de-skew yaw rate was searched against
-        at a low frame rate (the velocity measured since it), the yaw rate is
-        `rate_search.keyframe_yaw_rate`."""
+    def _keyframe_rate(
+        self, reference: ScanNode, base: ScanNode, scan: PreparedScan
+    ) -> float | None:
+        """The de-skew yaw rate [rad/s] `scan` gets if it becomes a keyframe at a low frame rate
+        (`rate_search.keyframe_yaw_rate`): the velocity's yaw rate (the mean since `base`'s
+        image) plus half the change between `base`'s de-skew rate and the scan's. Both rates
+        must be relative to the same image's de-skew (the searches match distortions): `base`
+        is `reference`, or had its own rate searched against it. None otherwise."""
+        velocity = self._state.velocity
+        if velocity is None or scan.twist is None or base.scan.twist is None:
+            return None
+        if base is not reference and base.rate_reference != reference.index:
+            return None
+        return rate_search.keyframe_yaw_rate(
+            float(velocity.twist[2]), float(scan.twist[2]), float(base.scan.twist[2])
+        )
+
+    def _refreshed(self, scan: PreparedScan, keyframe_rate: float | None) -> PreparedScan:
+        """Re-render a new keyframe whose de-skew velocity is stale (e.g. the first scans), at
+        `keyframe_rate` [rad/s] (`_keyframe_rate`, low frame rates) when given."""
         velocity, dcfg = self._state.velocity, self.config.deskew
         if velocity is None or not dcfg.enabled or scan.polar.timing is None:
             return scan
         new = self._velocity_at(image_time_ns(scan))
         if scan.rate_step is not None or (scan.twist is not None and close_twists(new, scan.twist)):
             return scan  # a rate step was chosen by the images, not the velocity
-        if dcfg.keyframe_rate_change and searched_from is not None and scan.twist is not None:
-            assert searched_from.twist is not None
+        if dcfg.keyframe_rate_change and keyframe_rate is not None:
             new = new.copy()
-            new[2] = rate_search.keyframe_yaw_rate(
-                float(velocity.twist[2]), float(scan.twist[2]), float(searched_from.twist[2])
-            )
+            new[2] = keyframe_rate
         return PreparedScan(scan.polar, new, self.config)
 
     def _trend_hypothesis(

@@ -19,7 +19,10 @@ image (a 1 s mean misses a curvature change inside the second), but at `keyframe
 mean plus half the change between the two sweeps' rates that the search measured. The yaw step
 between the two images gives the sum of the two sweeps' rates, the search their difference, so
 the keyframe's rate does not carry the reference's error (where the yaw rate is linear between
-the two sweeps), and the next scan's search matches it (docs/odometry_notes.md, stop 19).
+the two sweeps), and the next scan's search matches it (docs/odometry_notes.md, stop 19). When
+the previous scan was not a keyframe, both scans were searched against the same keyframe: the
+difference of their two searched rates is the change, and the reference's error cancels in it
+(stop 20).
 
 `step_searched` goes one step further where the yaw rate changed: a curvature step inside a sweep
 is a step of the yaw rate, which no constant de-skew follows (both sides of the step turn the
@@ -90,11 +93,13 @@ def keyframe_yaw_rate(mean_rate: float, searched_rate: float, reference_rate: fl
     """The de-skew yaw rate [rad/s] of a new keyframe at a low frame rate.
 
     Args:
-        mean_rate: the mean yaw rate between the reference's image and the keyframe's [rad/s].
-        searched_rate: the keyframe's de-skew yaw rate as its search against the reference left
-            it [rad/s] ...
-        reference_rate: ... and the reference's [rad/s]; their difference is the change of the
-            yaw rate from one sweep to the other (the search matches the two distortions).
+        mean_rate: the mean yaw rate between the previous scan's image and the keyframe's
+            [rad/s].
+        searched_rate: the keyframe's de-skew yaw rate as its search left it [rad/s] ...
+        reference_rate: ... and the previous scan's [rad/s], relative to the same image: the
+            previous scan itself (the keyframe was searched against it) or the image both were
+            searched against. Their difference is the change of the yaw rate from one sweep to
+            the other (the search matches distortions, so the common image's error cancels).
 
     With the yaw rate linear in time between the two sweeps, the mean is the average of their
     rates; half the measured change on top of it is the keyframe's sweep rate.

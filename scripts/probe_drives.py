@@ -1,9 +1,13 @@
-"""Write the stop-19 probe drives: four simulated drives nothing was ever tuned on.
+"""Write the probe drives: simulated drives nothing was ever tuned on.
 
-They differ from the named scenarios in route, town, speed and seed: a fast ring with a U-turn
-and a revisit the other way (14-18 m/s), a slow staircase of narrow streets with a three-point
-turn and reversing (6-9 m/s), three roundabouts and a revisit, and a long slow lattice drive
-(5-9 m/s, 2.3 km). Each is written in the MulRan layout under OUT/mulran/<name>, so that
+They differ from the named scenarios in route, town, speed and seed. Stop 19's four: a fast ring
+with a U-turn and a revisit the other way (14-18 m/s), a slow staircase of narrow streets with a
+three-point turn and reversing (6-9 m/s), three roundabouts and a revisit, and a long slow lattice
+drive (5-9 m/s, 2.3 km). Stop 20's four: out along a street of a curved town, round a block and
+back the way it came (smooth driving, 9-14 m/s); a zigzag of junction turns with a U-turn at its
+end and back down it; a long street at 13-16 m/s with a U-turn, back, and round a block; and a
+loop of blocks with three roundabouts, a stop and reversing, driven again in part. Each is
+written in the MulRan layout under OUT/mulran/<name>, so that
 
     python scripts/probe_drives.py --out /data/probe
     python scripts/bench_odometry.py --data-root /data/probe --held-out mulran/probe_ring_fast ...
@@ -52,6 +56,20 @@ _LATTICE: Waypoints = (
     *((4, 1), (4, 3), (6, 3), (6, 1), (4, 1)),
 )
 """A loop of blocks twice in the same direction, then a block beyond it (no revisit there)."""
+_BLOCK_BACK: Waypoints = (
+    *((0, 2), (3, 2), (3, 3), (4, 3), (4, 2), (3, 2)),
+    *((0, 2), (0, 1), (2, 1)),
+)
+"""Out along a street, round a block, back along the street the other way, then a turn off."""
+_ZIGZAG: Waypoints = (
+    *((0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3), (4, 3)),
+    *((3, 3), (3, 2), (2, 2), (2, 1)),
+)
+"""A staircase of junction turns, a U-turn before node (4, 3), back down the staircase."""
+_STREET_BACK: Waypoints = ((0, 1), (4, 1), (0, 1), (0, 2), (2, 2), (2, 1), (3, 1))
+"""A long street, a U-turn before its end, back along it, then round a block onto it again."""
+_ROUND_REVERSE: Waypoints = ((0, 0), (2, 0), (2, 2), (0, 2), (0, 0), (2, 0), (3, 0))
+"""Round a loop of blocks and along its first street again."""
 
 
 def _probe(
@@ -62,10 +80,11 @@ def _probe(
     town: TownConfig,
     plan: DrivePlan | None = None,
     driving: DrivingConfig | None = None,
+    stop: int = 19,
 ) -> Scenario:
     return Scenario(
         name=name,
-        description=f"stop-19 probe drive {name}",
+        description=f"stop-{stop} probe drive {name}",
         seed=seed,
         waypoints=route,
         town_routes=(route,),
@@ -125,6 +144,57 @@ PROBES: dict[str, Scenario] = {
             _LATTICE,
             TownConfig(n_blocks=(7, 4)),
             driving=DrivingConfig(cruise_speed_mps=(5.0, 9.0)),
+        ),
+        _probe(
+            "probe_block_back",
+            81,
+            50,
+            _BLOCK_BACK,
+            TownConfig(n_blocks=(5, 4), block_size_m=(60.0, 120.0)),
+            driving=DrivingConfig(cruise_speed_mps=(9.0, 14.0), accel_mps2=2.0, decel_mps2=3.0),
+            stop=20,
+        ),
+        _probe(
+            "probe_zigzag",
+            82,
+            51,
+            _ZIGZAG,
+            plan_town(n_blocks=(5, 4), block_size_m=(55.0, 90.0), **WIDE_STREETS),
+            DrivePlan(
+                events=(Stop(3, 10.0), TurnAround(7, "u_turn", 35.0), Stop(10, 4.0)),
+                driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(11.0, 14.0)),
+            ),
+            stop=20,
+        ),
+        _probe(
+            "probe_street_back",
+            83,
+            52,
+            _STREET_BACK,
+            plan_town(n_blocks=(5, 3), block_size_m=(100.0, 150.0), **WIDE_STREETS),
+            DrivePlan(
+                events=(TurnAround(4, "u_turn", 45.0), Stop(9, 8.0)),
+                driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(13.0, 16.0)),
+            ),
+            stop=20,
+        ),
+        _probe(
+            "probe_round_reverse",
+            84,
+            53,
+            _ROUND_REVERSE,
+            plan_town(n_blocks=(4, 3), block_size_m=(70.0, 100.0), **OPEN_JUNCTIONS),
+            DrivePlan(
+                events=(
+                    Roundabout(2),
+                    Stop(4, 10.0),
+                    Reverse(6, 50.0, 20.0),
+                    Roundabout(8),
+                    Roundabout(10),
+                ),
+                driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(9.0, 13.0)),
+            ),
+            stop=20,
         ),
     )
 }

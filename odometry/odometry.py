@@ -44,9 +44,10 @@ import logging
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, rate_search, recovery
+from odometry import OdometryError, deskew_choice, rate_search, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
+from odometry.deskew_choice import Rendered, expected_twist, refreshed, with_trend
 from odometry.history import OdometryResult
 from odometry.preprocess import preprocess_polar
 from odometry.reference_time import (
@@ -69,11 +70,8 @@ from odometry.uncertainty import (
     unseen_covariance,
 )
 from odometry.velocity import (
-    REDESKEW_MPS,
-    REDESKEW_RADPS,
     Velocity,
     bounded_twist,
-    close_twists,
 )
 from raplace.se2 import between, compose
 from raplace.units import NS_PER_S
@@ -183,7 +181,7 @@ class Odometry:
         reference, estimate = self._search(index, scan, predicted)
         if reference is None:
             return self._gap(index, scan, predicted, estimate)
-        scan, estimate = self._trend_hypothesis(reference, scan, estimate)
+        scan, estimate = with_trend(reference, scan, estimate, state.velocity, self.config)
         return self._accept(index, scan, reference, estimate, dt_s)
 
     # -- steps ---------------------------------------------------------------------------------
@@ -311,9 +309,7 @@ class Odometry:
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
-            scan, estimate = self._redeskewed(reference, base, scan, estimate, interval_s)
-            scan, estimate = self._rate_searched(reference, scan, estimate, interval_s)
-            scan, estimate = self._step_searched(reference, base, scan, estimate, interval_s)
+            scan, estimate = self._chosen_deskew(reference, base, (scan, estimate), interval_s)
             image_pose = compose(reference.image_pose, estimate.motion)
             before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)
@@ -321,7 +317,7 @@ class Odometry:
                 self._revise(previous, before)
             if rate_search.searched_slowly(interval_s, self.config):
                 rate_reference = reference.index
-                keyframe_rate = self._keyframe_rate(reference, base, scan)
+                keyframe_rate = deskew_choice.keyframe_rate(reference, base, scan, state.velocity)
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
@@ -341,7 +337,7 @@ class Odometry:
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = self._refreshed(node.scan, keyframe_rate)
+            node.scan = refreshed(node.scan, keyframe_rate, state.velocity, self.config)
             state.earlier_keyframes = recovery.remembered_keyframes(
                 state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
             )
@@ -349,7 +345,7 @@ class Odometry:
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = self._refreshed(keyframe.scan, None)
+                keyframe.scan = refreshed(keyframe.scan, None, state.velocity, self.config)
         state.previous = state.last_registered = node
         return self._record(
             node,
@@ -400,67 +396,19 @@ class Odometry:
         )
         return in_previous_axes(previous.conversion_covariance, node.conversion_covariance)
 
-    def _redeskewed(
-        self,
-        reference: ScanNode,
-        base: ScanNode,
-        scan: PreparedScan,
-        estimate: MotionEstimate,
-        interval_s: float,
-    ) -> tuple[PreparedScan, MotionEstimate]:
-        """`scan` and its estimate, re-rendered and re-registered when the velocity it was
-        de-skewed with is far from the one its registration measures since `base` (a step of
-        the velocity: hard braking, a curvature step at a junction; a stale velocity bends the
-        image). The re-registration is seeded with the first estimate."""
-        if scan.twist is None or self._state.velocity is None or interval_s <= 0:
-            return scan, estimate
-        measured = bounded_twist(measured_twist(reference, base, estimate, interval_s), self.config)
-        if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
-            return scan, estimate
-        again = PreparedScan(scan.polar, measured, self.config)
-        redone = register_images(reference.scan, again, self.config, hint=estimate.motion)
-        return (again, redone) if redone.ok else (scan, estimate)
-
-    def _rate_searched(
-        self, reference: ScanNode, scan: PreparedScan, estimate: MotionEstimate, interval_s: float
-    ) -> tuple[PreparedScan, MotionEstimate]:
-        """`scan` and its estimate, or the scan de-skewed at a yaw rate searched by peak quality
-        where the search is wanted (`rate_search.rounds_wanted`: low frame rates, weak peaks)."""
-        if self._state.velocity is None:
-            return scan, estimate
-        cfg = self.config
-        last = self._state.history[len(self._state.history) - 1].quality
-        rounds = rate_search.rounds_wanted(scan, estimate, interval_s, last, cfg)
-        if rounds == 0:
-            return scan, estimate
-        return rate_search.searched(reference.scan, scan, estimate, cfg, register_images, rounds)
-
-    def _step_searched(
-        self,
-        reference: ScanNode,
-        base: ScanNode,
-        scan: PreparedScan,
-        estimate: MotionEstimate,
-        interval_s: float,
-    ) -> tuple[PreparedScan, MotionEstimate]:
-        """`scan` and its estimate, or the scan de-skewed with a step of the yaw rate within its
-        sweep where the yaw rate measured since `base` (`interval_s` before) stepped from a
-        steady one (`rate_search.step_wanted`)."""
-        velocity = self._state.velocity
-        if velocity is None or interval_s <= 0:
-            return scan, estimate
-        measured = measured_twist(reference, base, estimate, interval_s)
-        rates = rate_search.StepRates(
-            before=float(velocity.twist[2]),
-            prior_change=velocity.yaw_rate_change,
-            measured=float(measured[2]),
-            interval_s=interval_s,
-        )
-        if not rate_search.step_wanted(scan, estimate, rates, self.config):
-            return scan, estimate
-        return rate_search.step_searched(
-            reference.scan, scan, estimate, rates, self.config, register_images
-        )
+    def _chosen_deskew(
+        self, reference: ScanNode, base: ScanNode, rendered: Rendered, interval_s: float
+    ) -> Rendered:
+        """The scan's rendering and registration against `reference` after the de-skew steps
+        that follow a measured velocity (`deskew_choice`: re-de-skewed at the measured
+        velocity, the yaw rate searched, a rate step searched); `base` is the scan the velocity
+        is measured from, `interval_s` [s] before."""
+        velocity, cfg = self._state.velocity, self.config
+        rendered = deskew_choice.redeskewed(reference, base, rendered, interval_s, velocity, cfg)
+        if velocity is not None:
+            last = self._state.history[len(self._state.history) - 1].quality
+            rendered = deskew_choice.rate_searched(reference, rendered, interval_s, last, cfg)
+        return deskew_choice.step_searched(reference, base, rendered, interval_s, velocity, cfg)
 
     # -- helpers ------------------------------------------------------------------------------
     def _place_first_images(
@@ -477,16 +425,10 @@ class Odometry:
         for node in {id(n): n for n in (state.keyframe, state.previous, reference) if n}.values():
             node.image_pose = compose(node.pose, motion_from_twist(twist, node.scan.image_time_s))
 
-    @property
-    def _trend_gain(self) -> float:
-        return self.config.deskew.yaw_rate_extrapolation
-
     def _velocity_at(self, time_ns: int, trend: bool = True) -> FloatArray:
-        """The running twist expected at `time_ns` (with the bounded yaw-rate trend, or constant
-        without `trend`), within the plausible speed and yaw rate."""
+        """`deskew_choice.expected_twist` of the running velocity at `time_ns`."""
         assert self._state.velocity is not None
-        gain = self._trend_gain if trend else 0.0
-        return bounded_twist(self._state.velocity.at(time_ns, gain), self.config)
+        return expected_twist(self._state.velocity, time_ns, self.config, trend)
 
     def _update_velocity(
         self, base: ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float
@@ -539,54 +481,6 @@ class Odometry:
             or estimate.quality < kcfg.min_peak_quality
             or keyframe.frames + 1 >= kcfg.max_frames
         )
-
-    def _keyframe_rate(
-        self, reference: ScanNode, base: ScanNode, scan: PreparedScan
-    ) -> float | None:
-        """The de-skew yaw rate [rad/s] `scan` gets if it becomes a keyframe at a low frame rate
-        (`rate_search.keyframe_yaw_rate`): the velocity's yaw rate (the mean since `base`'s
-        image) plus half the change between `base`'s de-skew rate and the scan's. Both rates
-        must be relative to the same image's de-skew (the searches match distortions): `base`
-        is `reference`, or had its own rate searched against it. None otherwise."""
-        velocity = self._state.velocity
-        if velocity is None or scan.twist is None or base.scan.twist is None:
-            return None
-        if base is not reference and base.rate_reference != reference.index:
-            return None
-        return rate_search.keyframe_yaw_rate(
-            float(velocity.twist[2]), float(scan.twist[2]), float(base.scan.twist[2])
-        )
-
-    def _refreshed(self, scan: PreparedScan, keyframe_rate: float | None) -> PreparedScan:
-        """Re-render a new keyframe whose de-skew velocity is stale (e.g. the first scans), at
-        `keyframe_rate` [rad/s] (`_keyframe_rate`, low frame rates) when given."""
-        velocity, dcfg = self._state.velocity, self.config.deskew
-        if velocity is None or not dcfg.enabled or scan.polar.timing is None:
-            return scan
-        new = self._velocity_at(image_time_ns(scan))
-        if scan.rate_step is not None or (scan.twist is not None and close_twists(new, scan.twist)):
-            return scan  # a rate step was chosen by the images, not the velocity
-        if dcfg.keyframe_rate_change and keyframe_rate is not None:
-            new = new.copy()
-            new[2] = keyframe_rate
-        return PreparedScan(scan.polar, new, self.config)
-
-    def _trend_hypothesis(
-        self, reference: ScanNode, scan: PreparedScan, estimate: MotionEstimate
-    ) -> tuple[PreparedScan, MotionEstimate]:
-        """`scan` (de-skewed at constant velocity) and its estimate, or the scan de-skewed with
-        the yaw-rate trend and its registration (seeded with the first) when that correlates
-        more strongly; nothing is tried when the trend hardly changes the twist."""
-        if scan.twist is None or self._state.velocity is None:
-            return scan, estimate
-        trend = self._velocity_at(image_time_ns(scan))
-        if close_twists(trend, scan.twist):
-            return scan, estimate
-        alternative = PreparedScan(scan.polar, trend, self.config)
-        other = register_images(reference.scan, alternative, self.config, hint=estimate.motion)
-        if other.ok and other.quality > estimate.quality:
-            return alternative, other
-        return scan, estimate
 
     def _gap(
         self,
@@ -658,12 +552,3 @@ class Odometry:
         )
         self._state.history.append(result)
         return result
-
-
-def measured_twist(
-    reference: ScanNode, base: ScanNode, estimate: MotionEstimate, interval_s: float
-) -> FloatArray:
-    """The twist that moves `base`'s image frame to the one `estimate` places against
-    `reference`, over `interval_s` [s]."""
-    image_pose = compose(reference.image_pose, estimate.motion)
-    return twist_from_motion(between(base.image_pose, image_pose), interval_s)

@@ -1,0 +1,187 @@
+"""Which de-skew a new scan keeps: the renderings `Odometry` tries for a scan, each step's choice.
+
+A scan is first rendered at the running velocity without its yaw-rate trend and registered
+(`Odometry.register`). Then, in order, each step below may render it again and register it
+again (seeded with the estimate so far); a new rendering is kept only where the images support
+it (a stronger correlation) or the registration itself measured a different velocity:
+
+- `with_trend`: the yaw-rate trend as a second hypothesis (a turn that goes on tightening);
+- `redeskewed`: the velocity the registration measures, when far from the rendered one (hard
+  braking, a curvature step);
+- `rate_searched`, `step_searched`: the yaw rate searched by peak quality, or a step of the yaw
+  rate inside the sweep (`odometry.rate_search`);
+- `refreshed`: a new keyframe re-rendered for the scans that will register against it, at low
+  frame rates at `keyframe_rate`.
+
+Pure functions of the scan, its references (`ScanNode`) and the running `Velocity`; the
+registration is `registration.register_images`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from odometry import rate_search
+from odometry.config import OdometryConfig
+from odometry.deskew import twist_from_motion
+from odometry.reference_time import image_time_ns
+from odometry.registration import MotionEstimate, PreparedScan, register_images
+from odometry.state import ScanNode
+from odometry.velocity import (
+    REDESKEW_MPS,
+    REDESKEW_RADPS,
+    Velocity,
+    bounded_twist,
+    close_twists,
+)
+from raplace.se2 import between, compose
+
+FloatArray = NDArray[np.float64]
+Rendered = tuple[PreparedScan, MotionEstimate]
+"""A rendering of a scan and its registration against the reference."""
+
+
+def expected_twist(
+    velocity: Velocity, time_ns: int, cfg: OdometryConfig, trend: bool = True
+) -> FloatArray:
+    """(3,) the running twist expected at `time_ns` [ns] (with the bounded yaw-rate trend, or
+    constant without `trend`), within the plausible speed and yaw rate."""
+    gain = cfg.deskew.yaw_rate_extrapolation if trend else 0.0
+    return bounded_twist(velocity.at(time_ns, gain), cfg)
+
+
+def measured_twist(
+    reference: ScanNode, base: ScanNode, estimate: MotionEstimate, interval_s: float
+) -> FloatArray:
+    """(3,) the twist that moves `base`'s image frame to the one `estimate` places against
+    `reference`, over `interval_s` [s]."""
+    image_pose = compose(reference.image_pose, estimate.motion)
+    return twist_from_motion(between(base.image_pose, image_pose), interval_s)
+
+
+def with_trend(
+    reference: ScanNode,
+    scan: PreparedScan,
+    estimate: MotionEstimate,
+    velocity: Velocity | None,
+    cfg: OdometryConfig,
+) -> Rendered:
+    """`scan` (de-skewed at constant velocity) and its estimate, or the scan de-skewed with
+    the yaw-rate trend and its registration (seeded with the first) when that correlates
+    more strongly; nothing is tried when the trend hardly changes the twist."""
+    if scan.twist is None or velocity is None:
+        return scan, estimate
+    trend = expected_twist(velocity, image_time_ns(scan), cfg)
+    if close_twists(trend, scan.twist):
+        return scan, estimate
+    alternative = PreparedScan(scan.polar, trend, cfg)
+    other = register_images(reference.scan, alternative, cfg, hint=estimate.motion)
+    if other.ok and other.quality > estimate.quality:
+        return alternative, other
+    return scan, estimate
+
+
+def redeskewed(
+    reference: ScanNode,
+    base: ScanNode,
+    rendered: Rendered,
+    interval_s: float,
+    velocity: Velocity | None,
+    cfg: OdometryConfig,
+) -> Rendered:
+    """The scan and its estimate (`rendered`), re-rendered and re-registered when the velocity
+    it was de-skewed with is far from the one its registration measures since `base`
+    (`interval_s` [s] before; a step of the velocity: hard braking, a curvature step at a
+    junction; a stale velocity bends the image). The re-registration is seeded with the first
+    estimate."""
+    scan, estimate = rendered
+    if scan.twist is None or velocity is None or interval_s <= 0:
+        return rendered
+    measured = bounded_twist(measured_twist(reference, base, estimate, interval_s), cfg)
+    if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
+        return rendered
+    again = PreparedScan(scan.polar, measured, cfg)
+    redone = register_images(reference.scan, again, cfg, hint=estimate.motion)
+    return (again, redone) if redone.ok else rendered
+
+
+def rate_searched(
+    reference: ScanNode,
+    rendered: Rendered,
+    interval_s: float,
+    last_quality: float,
+    cfg: OdometryConfig,
+) -> Rendered:
+    """The scan and its estimate (`rendered`), or the scan de-skewed at a yaw rate searched by
+    peak quality where the search is wanted (`rate_search.rounds_wanted`: low frame rates,
+    a peak weak against the previous scan's `last_quality`)."""
+    scan, estimate = rendered
+    rounds = rate_search.rounds_wanted(scan, estimate, interval_s, last_quality, cfg)
+    if rounds == 0:
+        return rendered
+    return rate_search.searched(reference.scan, scan, estimate, cfg, register_images, rounds)
+
+
+def step_searched(
+    reference: ScanNode,
+    base: ScanNode,
+    rendered: Rendered,
+    interval_s: float,
+    velocity: Velocity | None,
+    cfg: OdometryConfig,
+) -> Rendered:
+    """The scan and its estimate (`rendered`), or the scan de-skewed with a step of the yaw
+    rate within its sweep where the yaw rate measured since `base` (`interval_s` [s] before)
+    stepped from a steady one (`rate_search.step_wanted`)."""
+    scan, estimate = rendered
+    if velocity is None or interval_s <= 0:
+        return rendered
+    measured = measured_twist(reference, base, estimate, interval_s)
+    rates = rate_search.StepRates(
+        before=float(velocity.twist[2]),
+        prior_change=velocity.yaw_rate_change,
+        measured=float(measured[2]),
+        interval_s=interval_s,
+    )
+    if not rate_search.step_wanted(scan, estimate, rates, cfg):
+        return rendered
+    return rate_search.step_searched(reference.scan, scan, estimate, rates, cfg, register_images)
+
+
+def keyframe_rate(
+    reference: ScanNode, base: ScanNode, scan: PreparedScan, velocity: Velocity | None
+) -> float | None:
+    """The de-skew yaw rate [rad/s] `scan` gets if it becomes a keyframe at a low frame rate
+    (`rate_search.keyframe_yaw_rate`): the velocity's yaw rate (the mean since `base`'s
+    image) plus half the change between `base`'s de-skew rate and the scan's. Both rates
+    must be relative to the same image's de-skew (the searches match distortions): `base`
+    is `reference`, or had its own rate searched against it. None otherwise."""
+    if velocity is None or scan.twist is None or base.scan.twist is None:
+        return None
+    if base is not reference and base.rate_reference != reference.index:
+        return None
+    return rate_search.keyframe_yaw_rate(
+        float(velocity.twist[2]), float(scan.twist[2]), float(base.scan.twist[2])
+    )
+
+
+def refreshed(
+    scan: PreparedScan,
+    yaw_rate: float | None,
+    velocity: Velocity | None,
+    cfg: OdometryConfig,
+) -> PreparedScan:
+    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans),
+    at the yaw rate `yaw_rate` [rad/s] (`keyframe_rate`, low frame rates) when given; `scan`
+    itself where nothing would change or a rate step was chosen by the images."""
+    dcfg = cfg.deskew
+    if velocity is None or not dcfg.enabled or scan.polar.timing is None:
+        return scan
+    new = expected_twist(velocity, image_time_ns(scan), cfg)
+    if scan.rate_step is not None or (scan.twist is not None and close_twists(new, scan.twist)):
+        return scan
+    if dcfg.keyframe_rate_change and yaw_rate is not None:
+        new = new.copy()
+        new[2] = yaw_rate
+    return PreparedScan(scan.polar, new, cfg)

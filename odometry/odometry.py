@@ -21,7 +21,8 @@ keeps: past motion cannot tell a turn that goes on tightening from a curvature s
 reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
 from the one its registration then measures (hard braking, a curvature step at a junction), the
 scan is re-rendered with the measured one and registered again; at low frame rates its yaw rate
-can also be searched by peak quality (`odometry.rate_search`, at low frame rates).
+can also be searched by peak quality (`odometry.rate_search`, at low frame rates). Each of these
+choices is a pure function in `odometry.deskew_choice`.
 
 Each registration is global (rotation over the full circle, translation over the whole coarse
 image; `registration.register_images`); the constant-velocity prediction is a search hint, never
@@ -47,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 from odometry import OdometryError, deskew_choice, rate_search, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.deskew_choice import Rendered, expected_twist, refreshed, with_trend
+from odometry.deskew_choice import Rendered
 from odometry.history import OdometryResult
 from odometry.preprocess import preprocess_polar
 from odometry.reference_time import (
@@ -181,7 +182,9 @@ class Odometry:
         reference, estimate = self._search(index, scan, predicted)
         if reference is None:
             return self._gap(index, scan, predicted, estimate)
-        scan, estimate = with_trend(reference, scan, estimate, state.velocity, self.config)
+        scan, estimate = deskew_choice.with_trend(
+            reference, scan, estimate, state.velocity, self.config
+        )
         return self._accept(index, scan, reference, estimate, dt_s)
 
     # -- steps ---------------------------------------------------------------------------------
@@ -337,7 +340,9 @@ class Odometry:
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = refreshed(node.scan, keyframe_rate, state.velocity, self.config)
+            node.scan = deskew_choice.refreshed(
+                node.scan, keyframe_rate, state.velocity, self.config
+            )
             state.earlier_keyframes = recovery.remembered_keyframes(
                 state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
             )
@@ -345,7 +350,9 @@ class Odometry:
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = refreshed(keyframe.scan, None, state.velocity, self.config)
+                keyframe.scan = deskew_choice.refreshed(
+                    keyframe.scan, None, state.velocity, self.config
+                )
         state.previous = state.last_registered = node
         return self._record(
             node,
@@ -428,7 +435,7 @@ class Odometry:
     def _velocity_at(self, time_ns: int, trend: bool = True) -> FloatArray:
         """`deskew_choice.expected_twist` of the running velocity at `time_ns`."""
         assert self._state.velocity is not None
-        return expected_twist(self._state.velocity, time_ns, self.config, trend)
+        return deskew_choice.expected_twist(self._state.velocity, time_ns, self.config, trend)
 
     def _update_velocity(
         self, base: ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float

@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+import odometry.deskew_choice as deskew_choice
 import odometry.odometry as odometry_module
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist
@@ -167,16 +168,19 @@ def _counted_registrations() -> Iterator[list[int]]:
     timing it): yields a one-element list holding the count."""
     calls = [0]
     original = odometry_module.register_images
+    callers = (odometry_module, deskew_choice)  # the modules `Odometry` registers from
 
     def counting(*args: Any, **kwargs: Any) -> MotionEstimate:
         calls[0] += 1
         return original(*args, **kwargs)
 
-    odometry_module.register_images = counting
+    for module in callers:
+        module.register_images = counting  # type: ignore[attr-defined]
     try:
         yield calls
     finally:
-        odometry_module.register_images = original
+        for module in callers:
+            module.register_images = original  # type: ignore[attr-defined]
 
 
 def bench_sequence(

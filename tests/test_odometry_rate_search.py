@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from test_odometry_recovery import driven
 from test_odometry_sim import render
 
-from odometry import OdometryConfig
+from odometry import OdometryConfig, deskew_choice
 from odometry.config import DeskewConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry
@@ -31,6 +31,7 @@ from odometry.rate_search import (
     vertex_offset,
 )
 from odometry.registration import MotionEstimate
+from odometry.velocity import Velocity
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.stride import strided
@@ -115,6 +116,30 @@ def test_keyframe_yaw_rate_from_the_mean_and_the_measured_change() -> None:
     assert np.rad2deg(rate) == pytest.approx(30.0, abs=1e-9)
     steady = keyframe_yaw_rate(np.deg2rad(15.0), np.deg2rad(17.0), np.deg2rad(17.0))
     assert np.rad2deg(steady) == pytest.approx(15.0, abs=1e-9)  # no change: the mean
+
+
+def test_keyframe_rate_takes_the_change_against_one_image() -> None:
+    """The previous scan's rate enters a new keyframe's only when both were searched against
+    the same image: the previous scan is the reference, or was searched against it. A rate
+    ramping 10 -> 30 deg/s between the sweeps (mean 20), both scans rendered 8 deg/s off
+    (against a keyframe 8 deg/s off) gives the keyframe's own 30; a previous scan searched
+    against another image gives nothing to take the change from."""
+    velocity = Velocity(twist=np.array([8.0, 0.0, np.deg2rad(20.0)]), time_ns=0)
+
+    def node(index: int, rate_dps: float, rate_reference: int | None) -> Any:
+        twist = np.array([8.0, 0.0, np.deg2rad(rate_dps)])
+        return SimpleNamespace(
+            index=index, scan=SimpleNamespace(twist=twist), rate_reference=rate_reference
+        )
+
+    keyframe, scan = node(4, 8.0, 3), node(6, 38.0, 4).scan
+    plain = node(5, 18.0, 4)  # searched against the keyframe, like the new scan
+    for reference in (keyframe, plain):  # registered against the keyframe or the plain scan
+        rate = deskew_choice.keyframe_rate(reference, plain, scan, velocity)
+        assert rate is not None and np.rad2deg(rate) == pytest.approx(30.0, abs=1e-9)
+    elsewhere = node(5, 18.0, 2)
+    assert deskew_choice.keyframe_rate(keyframe, elsewhere, scan, velocity) is None
+    assert deskew_choice.keyframe_rate(keyframe, plain, scan, None) is None
 
 
 REVERSAL_PERIOD_S = 0.5

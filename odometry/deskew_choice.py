@@ -156,8 +156,9 @@ def keyframe_rate(
     (`rate_search.keyframe_yaw_rate`): the velocity's yaw rate (the mean since `base`'s
     image) plus half the change between `base`'s de-skew rate and the scan's. Both rates
     must be relative to the same image's de-skew (the searches match distortions): `base`
-    is `reference`, or had its own rate searched against it. None otherwise."""
-    if velocity is None or scan.twist is None or base.scan.twist is None:
+    is `reference`, or had its own rate searched against it. None otherwise, and when `base`
+    is a gap (its pose, hence the mean, is a prediction)."""
+    if velocity is None or scan.twist is None or base.scan.twist is None or base.gap:
         return None
     if base is not reference and base.rate_reference != reference.index:
         return None

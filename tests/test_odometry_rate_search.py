@@ -129,7 +129,10 @@ def test_keyframe_rate_takes_the_change_against_one_image() -> None:
     def node(index: int, rate_dps: float, rate_reference: int | None) -> Any:
         twist = np.array([8.0, 0.0, np.deg2rad(rate_dps)])
         return SimpleNamespace(
-            index=index, scan=SimpleNamespace(twist=twist), rate_reference=rate_reference
+            index=index,
+            scan=SimpleNamespace(twist=twist),
+            rate_reference=rate_reference,
+            gap=False,
         )
 
     keyframe, scan = node(4, 8.0, 3), node(6, 38.0, 4).scan
@@ -140,6 +143,9 @@ def test_keyframe_rate_takes_the_change_against_one_image() -> None:
     elsewhere = node(5, 18.0, 2)
     assert deskew_choice.keyframe_rate(keyframe, elsewhere, scan, velocity) is None
     assert deskew_choice.keyframe_rate(keyframe, plain, scan, None) is None
+    gap = node(5, 18.0, None)
+    gap.gap = True  # registered against a gap (the last resort): its pose is a prediction
+    assert deskew_choice.keyframe_rate(gap, gap, scan, velocity) is None
 
 
 REVERSAL_PERIOD_S = 0.5

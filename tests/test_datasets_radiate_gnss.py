@@ -85,14 +85,19 @@ def test_real_gnss_log_drops_repeated_fixes_and_finds_its_outages(track: GnssTra
     assert 1450.0 < path < 1570.0  # the 1.5 km drive
 
 
-def _write_log(folder: Path, fixes: list[tuple[float, float, float]], dt_s: float = 0.1) -> None:
-    """A GPS_IMU_Twist log of (latitude, longitude, yaw [rad]) fixes `dt_s` apart."""
+def _write_log(
+    folder: Path, fixes: list[tuple[float, float, float]], dt_s: float = 0.1, speed: float = 0.0
+) -> None:
+    """A GPS_IMU_Twist log of (latitude, longitude, yaw [rad]) fixes `dt_s` apart, the INS
+    saying it drives at `speed` [m/s]."""
     (folder / "GPS_IMU_Twist").mkdir(parents=True)
     lines = []
     zeros = "0.0,0.0,0.0"
     for k, (lat, lon, yaw) in enumerate(fixes, start=1):
         quat = f"0.0,0.0,{np.sin(yaw / 2):.12f},{np.cos(yaw / 2):.12f}"
-        record = [f"{lat:.12f},{lon:.12f},100.0", zeros, zeros, zeros, quat] + [zeros] * 13
+        twist = f"{speed},0.0,0.0"
+        record = [f"{lat:.12f},{lon:.12f},100.0", zeros, zeros, zeros, quat] + [zeros] * 11
+        record += [twist, zeros]
         (folder / "GPS_IMU_Twist" / f"{k:06d}.txt").write_text("\n".join(record) + "\n")
         t = int(round(1000 * NS_PER_S + k * dt_s * NS_PER_S))
         lines.append(f"Frame: {k:06d} Time: {t // NS_PER_S}.{t % NS_PER_S}")
@@ -111,6 +116,22 @@ def test_fixes_become_utm_metres_and_the_quaternion_a_heading(tmp_path: Path) ->
     # Grid north is within a degree of true north this close to the central meridian.
     assert np.degrees(np.arctan2(step[0], step[1])) == pytest.approx(forward, abs=1.0)
     assert track.poses[:, 2] == pytest.approx([0.5, 0.6])
+
+
+@pytest.mark.parametrize("standing", [True, False])
+def test_a_held_fix_is_an_outage_while_driving_and_a_stop_while_standing(
+    tmp_path: Path, standing: bool
+) -> None:
+    lat, lon = 55.91, -3.32
+    step = 0.0 if standing else 0.0002  # about 22 m after the hold while driving
+    fixes = [(lat, lon, 0.0)] * 21 + [(lat + step, lon, 0.0), (lat + 2 * step + 1e-6, lon, 0.0)]
+    _write_log(tmp_path, fixes, speed=0.0 if standing else 11.0)
+    track = read_gnss_track(tmp_path)
+    assert len(track.outages) == (0 if standing else 1)
+    assert track.repeated_fixes == (0 if standing else 20)
+    during = track.times_ns[0] + NS_PER_S
+    pose = track.radar_poses([during])[0]
+    assert np.isfinite(pose[0]) == standing
 
 
 def test_a_log_without_two_distinct_fixes_is_refused(tmp_path: Path) -> None:

@@ -41,16 +41,20 @@ GNSS_TIMES_FILE = "GPS_IMU_Twist.txt"
 GNSS_FILE_LINES = 18
 """Lines of one GPS_IMU_Twist file: fix, covariance (3), orientation, angular velocity,
 acceleration, three covariances (3 each), twist linear, twist angular."""
-LINE_FIX, LINE_ORIENTATION = 0, 4
+LINE_FIX, LINE_ORIENTATION, LINE_TWIST = 0, 4, 16
 GNSS_ACCURACY_M = 2.0
 """Stated accuracy of a GNSS fix without RTK [m]: metre level."""
 MAX_FIX_GAP_NS = 500_000_000
 """A gap between fixes longer than this is an outage: scans inside it have no ground truth."""
+STANDING_SPEED_MPS = 0.5
+"""A held record whose INS speed is below this, and after which the next fix is where it was,
+is the vehicle standing still, not an outage [m/s]."""
 MOVING_SPEED_MPS = 3.0
 """Course over ground is compared with the INS heading only above this speed [m/s]."""
 COURSE_MAX_STEP_NS = 200_000_000
 """... and only over steps between fixes at most this far apart (no course across outages)."""
 WGS84 = "EPSG:4326"
+EARTH_RADIUS_M = 6_371_000.0
 UTM_NORTH_EPSG, UTM_SOUTH_EPSG = 32600, 32700
 
 TIME_LINE = re.compile(r"^\s*Frame:\s*(\d+)\s+Time:\s*(\d+)(?:\.(\d+))?\s*$")
@@ -106,19 +110,21 @@ def read_time_list(
     return frames, stamps
 
 
-def _read_fix(path: Path) -> tuple[float, float, float, float, float, float]:
-    """(latitude deg, longitude deg, qx, qy, qz, qw) from one GPS_IMU_Twist file."""
+def _read_fix(path: Path) -> tuple[float, ...]:
+    """(latitude deg, longitude deg, qx, qy, qz, qw, speed m/s) from one GPS_IMU_Twist file."""
     try:
         lines = [line for line in path.read_text(encoding="ascii").splitlines() if line.strip()]
         if len(lines) != GNSS_FILE_LINES:
             raise ValueError(f"{len(lines)} lines, expected {GNSS_FILE_LINES}")
         fix = [float(v) for v in lines[LINE_FIX].split(",")]
         quat = [float(v) for v in lines[LINE_ORIENTATION].split(",")]
-        if len(fix) != 3 or len(quat) != 4 or not np.all(np.isfinite(fix + quat)):
-            raise ValueError("expected 3 finite fix values and 4 quaternion values")
+        twist = [float(v) for v in lines[LINE_TWIST].split(",")]
+        values = fix + quat + twist
+        if len(fix) != 3 or len(quat) != 4 or len(twist) != 3 or not np.all(np.isfinite(values)):
+            raise ValueError("expected 3 fix, 4 quaternion and 3 twist values, all finite")
     except (OSError, ValueError) as exc:
         raise DatasetFormatError(f"{path}: not a GPS_IMU_Twist record ({exc})") from None
-    return fix[0], fix[1], quat[0], quat[1], quat[2], quat[3]
+    return fix[0], fix[1], quat[0], quat[1], quat[2], quat[3], float(np.hypot(*twist[:2]))
 
 
 def utm_epsg(latitude_deg: float, longitude_deg: float) -> int:
@@ -200,6 +206,42 @@ class GnssTrack:
         return int(inside.sum())
 
 
+def held_records(records: NDArray[np.float64], times_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """(N,) True for a record that repeats the previous fix while the fix is lost.
+
+    The log repeats its last record until a new fix arrives: at its own rate when fixes are
+    slower, for seconds in an outage. A run of repeats longer than `MAX_FIX_GAP_NS` whose INS
+    speed is below `STANDING_SPEED_MPS` and after which the next fix is where it was is the
+    vehicle standing: those records are kept (it stood there), not dropped as an outage.
+
+    Args:
+        records: (N, 7) latitude, longitude, quaternion (4), INS speed [m/s].
+        times_ns: (N,) their times.
+    """
+    repeated = np.zeros(len(records), dtype=bool)
+    repeated[1:] = np.all(records[1:, :2] == records[:-1, :2], axis=1)
+    starts = np.flatnonzero(~repeated)
+    ends = np.append(starts[1:], len(records))
+    for start, end in zip(starts, ends, strict=True):
+        if end - start < 2 or times_ns[end - 1] - times_ns[start] <= MAX_FIX_GAP_NS:
+            continue
+        standing = records[start, 6] < STANDING_SPEED_MPS
+        if end < len(records):
+            moved = _metres_between(records[start, :2], records[end, :2])
+            standing = standing and moved <= GNSS_ACCURACY_M
+        if standing:
+            repeated[start:end] = False
+    return repeated
+
+
+def _metres_between(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """Distance between two (latitude, longitude) points [m] (equirectangular; short spans)."""
+    lat = np.radians(0.5 * (a[0] + b[0]))
+    d_north = np.radians(b[0] - a[0]) * EARTH_RADIUS_M
+    d_east = np.radians(b[1] - a[1]) * EARTH_RADIUS_M * np.cos(lat)
+    return float(np.hypot(d_north, d_east))
+
+
 def read_gnss_track(folder: Path) -> GnssTrack:
     """Read `<folder>/GPS_IMU_Twist.txt` and `<folder>/GPS_IMU_Twist/NNNNNN.txt`.
 
@@ -210,8 +252,7 @@ def read_gnss_track(folder: Path) -> GnssTrack:
     times_path = folder / GNSS_TIMES_FILE
     frames, stamps = read_time_list(times_path, strictly_increasing=False)
     records = np.array([_read_fix(folder / GNSS_FOLDER / f"{frame}.txt") for frame in frames])
-    repeated = np.zeros(len(records), dtype=bool)
-    repeated[1:] = np.all(records[1:, :2] == records[:-1, :2], axis=1)
+    repeated = held_records(records, stamps)
     kept, times = records[~repeated], stamps[~repeated]
     if len(kept) < 2:
         raise DatasetFormatError(f"{times_path}: fewer than two distinct GNSS fixes")

@@ -49,6 +49,13 @@ def test_an_offset_between_two_clocks_is_recovered_from_speeds_alone() -> None:
     assert offset.halves_s == pytest.approx((1.3, 1.3), abs=0.02)
 
 
+def test_an_estimate_at_one_hertz_still_has_a_speed_profile() -> None:
+    estimate = _stop_and_go(1.0, start_s=10.0)
+    gt = _stop_and_go(4.0, start_s=10.0 + 0.4, duration_s=125.0)
+    offset = estimate_time_offset(estimate, gt)
+    assert offset is not None and offset.offset_s == pytest.approx(-0.4, abs=0.03)
+
+
 def test_a_drive_at_constant_speed_gives_no_offset() -> None:
     t = np.arange(0, 60 * NS_PER_S, NS_PER_S // 4, dtype=np.int64)
     poses = np.stack([10.0 * t / NS_PER_S, 0 * t, 0 * t], axis=-1).astype(np.float64)

@@ -124,7 +124,7 @@ def _read_fix(path: Path) -> tuple[float, ...]:
             raise ValueError("expected 3 fix, 4 quaternion and 3 twist values, all finite")
     except (OSError, ValueError) as exc:
         raise DatasetFormatError(f"{path}: not a GPS_IMU_Twist record ({exc})") from None
-    return fix[0], fix[1], quat[0], quat[1], quat[2], quat[3], float(np.hypot(*twist[:2]))
+    return fix[0], fix[1], quat[0], quat[1], quat[2], quat[3], float(np.hypot(twist[0], twist[1]))
 
 
 def utm_epsg(latitude_deg: float, longitude_deg: float) -> int:

@@ -7,8 +7,8 @@ without any heading: the speed |v(t)| of the estimate is cross-correlated with t
 |v(t + d)| over a grid of candidate offsets, and the peak refined by a parabola. Its
 uncertainty is a block jackknife over `JACKKNIFE_BLOCKS` stretches of the drive.
 
-Speeds come from finite differences of consecutive poses; a difference over a gap of more than
-`MAX_STEP_S` (a GT outage, dropped scans) is not a speed and is left out.
+Speeds come from finite differences of consecutive poses; a difference over a gap (a GT outage,
+dropped scans: longer than `max_step_s` of the trajectory) is not a speed and is left out.
 """
 
 from __future__ import annotations
@@ -31,7 +31,9 @@ SEARCH_STEP_S = 0.01
 DEFAULT_MAX_OFFSET_S = 5.0
 """Offsets searched: -max .. +max [s]."""
 MAX_STEP_S = 0.6
-"""A pose difference over a longer time is not a speed (an outage or dropped scans) [s]."""
+"""A pose difference over a longer time is not a speed (an outage or dropped scans) [s] ..."""
+GAP_FACTOR = 1.5
+"""... unless the trajectory's own sampling is slower: then 1.5 of its median sample period."""
 MIN_OVERLAP_S = 20.0
 """At least this much common driving for an estimate [s]."""
 MIN_SPEED_STD_MPS = 0.5
@@ -71,24 +73,36 @@ class TimeOffset:
         }
 
 
-def speed_samples(trajectory: Trajectory) -> tuple[FloatArray, FloatArray]:
-    """(mid times [s], speeds [m/s]) of consecutive poses at most `MAX_STEP_S` apart."""
+def max_step_s(times_ns: NDArray[np.int64]) -> float:
+    """The longest step between samples that is not a gap [s]: `MAX_STEP_S`, or `GAP_FACTOR`
+    median sample periods for a trajectory sampled more slowly (a 1 Hz odometry)."""
+    if len(times_ns) < 2:
+        return MAX_STEP_S
+    return max(MAX_STEP_S, GAP_FACTOR * float(np.median(np.diff(times_ns))) / NS_PER_S)
+
+
+def speed_samples(trajectory: Trajectory) -> tuple[FloatArray, FloatArray, float]:
+    """(mid times [s], speeds [m/s], the step limit [s]) of consecutive poses at most
+    `max_step_s` apart."""
     t = trajectory.timestamps_ns.astype(np.float64) / NS_PER_S
     step = np.diff(trajectory.poses[:, :2], axis=0)
     dt = np.diff(t)
-    ok = (dt > 0) & (dt <= MAX_STEP_S)
+    limit = max_step_s(trajectory.timestamps_ns)
+    ok = (dt > 0) & (dt <= limit)
     speed = np.hypot(step[:, 0], step[:, 1])[ok] / dt[ok]
-    return 0.5 * (t[1:] + t[:-1])[ok], speed
+    return 0.5 * (t[1:] + t[:-1])[ok], speed, limit
 
 
-def _profile(times_s: FloatArray, speeds: FloatArray, grid_s: FloatArray) -> FloatArray:
-    """Speeds interpolated onto `grid_s`; NaN where no two samples within `MAX_STEP_S` bracket."""
+def _profile(
+    times_s: FloatArray, speeds: FloatArray, grid_s: FloatArray, limit_s: float
+) -> FloatArray:
+    """Speeds interpolated onto `grid_s`; NaN where no two samples `limit_s` apart bracket."""
     if len(times_s) < 2:
         return np.full(len(grid_s), np.nan)
     values = np.interp(grid_s, times_s, speeds)
     right = np.clip(np.searchsorted(times_s, grid_s), 1, len(times_s) - 1)
     bracket = times_s[right] - times_s[right - 1]
-    outside = (grid_s < times_s[0]) | (grid_s > times_s[-1]) | (bracket > MAX_STEP_S)
+    outside = (grid_s < times_s[0]) | (grid_s > times_s[-1]) | (bracket > limit_s)
     values[outside] = np.nan
     return values
 
@@ -151,17 +165,17 @@ def estimate_time_offset(
         None when the two overlap by less than `MIN_OVERLAP_S` of driving or the speed barely
         varies (no profile to match).
     """
-    est_t, est_v = speed_samples(estimate)
-    gt_t, gt_v = speed_samples(ground_truth)
+    est_t, est_v, est_limit = speed_samples(estimate)
+    gt_t, gt_v, gt_limit = speed_samples(ground_truth)
     if len(est_t) < 3 or len(gt_t) < 3 or np.std(est_v) < MIN_SPEED_STD_MPS:
         return None
     grid = np.arange(est_t[0], est_t[-1], 1.0 / GRID_HZ)
-    est_profile = _profile(est_t, est_v, grid)
+    est_profile = _profile(est_t, est_v, grid, est_limit)
     reach = int(np.ceil(max_offset_s / SEARCH_STEP_S))
     fine = grid[0] + SEARCH_STEP_S * np.arange(
         -reach, int((grid[-1] - grid[0]) / SEARCH_STEP_S) + reach + 2
     )
-    gt_fine = _profile(gt_t, gt_v, fine)
+    gt_fine = _profile(gt_t, gt_v, fine, gt_limit)
     rows = reach + np.round((grid - grid[0]) / SEARCH_STEP_S).astype(np.int64)
     shifts = np.arange(-reach, reach + 1)
 
@@ -200,7 +214,7 @@ def ground_truth_at(ground_truth: Trajectory, times_ns: NDArray[np.int64]) -> Fl
     right = np.clip(np.searchsorted(t, query), 1, len(t) - 1)
     left = right - 1
     span = (t[right] - t[left]).astype(np.float64)
-    ok = (query >= t[0]) & (query <= t[-1]) & (span <= MAX_STEP_S * NS_PER_S)
+    ok = (query >= t[0]) & (query <= t[-1]) & (span <= max_step_s(t) * NS_PER_S)
     weight = (query[ok] - t[left][ok]) / span[ok]
     a, b = poses[left][ok], poses[right][ok]
     result[ok, :2] = a[:, :2] + weight[:, None] * (b[:, :2] - a[:, :2])

@@ -25,7 +25,7 @@ processes' load, which stretches the wall clock but not this process's CPU time,
 as the machine's speed). Each window also records the CPU time of every pipeline step and the
 calls and CPU time of the loop detector's parts (`LoopMeter`).
 
-Bars (issue 15): scans/s of the last window within 20 % of the first; peak memory <= 2 GB; place
+Bars: scans/s of the last window within 20 % of the first; peak memory <= 2 GB; place
 query over 20,000 keyframes <= 5 ms.
 
 `--frames N` runs on the first N scans only (of the whole sequence when it is generated, else

@@ -8,8 +8,8 @@ synthetic one):
   search with the rotation-invariant shortlist (new), without it (old: every entry scored at low
   resolution) and exhaustive, side by side, median and minimum;
 - the Scan Context baseline (context and query) and the relative pose.
-Bars: descriptor <= 10 ms, query over 5,000 keyframes <= 10 ms (issue 4); query over 20,000
-keyframes <= 5 ms (issue 15).
+Bars: descriptor <= 10 ms, query over 5,000 keyframes <= 10 ms; query over 20,000
+keyframes <= 5 ms.
 
 Usage: python scripts/bench_raplace.py [--keyframes 5000 20000] [--repeats 50] [--scan FILE.csv]
 """

@@ -5,8 +5,8 @@ Runs RaPlace and Scan Context on
   excluded);
 - synthetic/multisession_b queried against synthetic/multisession_a (multi-session);
 - optionally synthetic/long,
-at the given revisit criteria, and prints a Markdown table for the README with the bars of
-issue 4 (RaPlace max F1 >= 0.9 on loop and reverse at 20 m and above Scan Context on reverse;
+at the given revisit criteria, and prints a Markdown table with the bars
+(RaPlace max F1 >= 0.9 on loop and reverse at 20 m and above Scan Context on reverse;
 >= 0.85 multi-session). Sequences are generated on first use into the data root
 ($RADAR_SLAM_DATA) and reused afterwards.
 

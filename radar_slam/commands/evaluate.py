@@ -139,7 +139,7 @@ def eval_command(
                 max_diff_ns=round(max_diff_ms * NS_PER_MS),
                 rpe_delta=rpe_delta,
             )
-        except TrajectoryError as exc:  # name the files (issue 12)
+        except TrajectoryError as exc:  # name the files
             raise TrajectoryError(f"{path} against {gt_path}: {exc}") from None
     typer.echo(
         f"ground truth: {gt_path} ({len(gt)} poses, {gt.length_m():.1f} m); "

@@ -28,8 +28,9 @@ from pathlib import Path
 DOC_PATH = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
 DOC_TITLE = "# Benchmarks"
 DOC_INTRO = (
-    "Every table below is written by the script named above it (run with `--write-doc`); "
-    "do not edit a table by hand, run its script again."
+    "Each table starts with a line naming the script that wrote it and the machine it ran on. "
+    "The script rewrites its table when run with `--write-doc`: run it again, never edit a table "
+    "by hand."
 )
 
 

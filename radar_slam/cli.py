@@ -28,7 +28,7 @@ COMMAND_MODULES = (
     "loops",
     "export",
     "batch",
-    "maps",  # issue-13
+    "maps",
 )
 
 app = typer.Typer(
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     User errors, a bad option value included, become one line on stderr and exit code 1;
     Ctrl-C exits with code 130; anything else is a bug and keeps its traceback.
     """
-    arguments = viewer_argv(sys.argv[1:] if argv is None else argv)  # issue-14: bare --viewer
+    arguments = viewer_argv(sys.argv[1:] if argv is None else argv)  # a bare --viewer
     try:
         code = app(args=arguments, standalone_mode=False)
     except SystemExit as exc:
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     except NoArgsIsHelpError as exc:
         exc.show()
         return exc.exit_code
-    except UsageError as exc:  # a bad option or argument: one line too (issue 12)
+    except UsageError as exc:  # a bad option or argument: one line too
         command = exc.ctx.command_path if exc.ctx is not None else "radar-slam"
         typer.echo(f"radar-slam: error: {command}: {_one_line(exc.format_message())}", err=True)
         return 1

@@ -3,7 +3,7 @@
 Each polar row (azimuth) sees every target from that row's own sensor pose, with a Gaussian
 beam in azimuth and a Gaussian point spread in range, so a scan of a rotated, translated or
 moving sensor is exact (no resampling of another scan, no fixed-point approximation of which
-azimuth sees a point). Used by the rotation-bias tests and `scripts/diagnose_rotation_bias.py`.
+azimuth sees a point). Used by the rotation-bias tests.
 
 Imported by name from the tests (pytest puts this folder on sys.path in its default import mode).
 """

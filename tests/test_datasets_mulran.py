@@ -190,7 +190,7 @@ def test_scans_outside_gt_are_nan_with_warning(
 ) -> None:
     seq_dir = make_sequence(tmp_path, mulran_raw_dir, gt=False)
     # GT rows every 0.1 s end at scan 0 + 0.063 s: scan 1 (0.187 s past the end, more than one
-    # GT period) and later have no GT; nothing is stretched to them (issue 12).
+    # GT period) and later have no GT; nothing is stretched to them.
     times = gt_times()[:3]
     write_global_pose(seq_dir / "global_pose.csv", times, base_pose_at(np.array(times)))
     with caplog.at_level(logging.WARNING):

@@ -107,7 +107,7 @@ def open_sequence(
             looked_in.append(folder.absolute())
     places = ", ".join(str(place) for place in dict.fromkeys(looked_in))
     known = ", ".join(sorted(families())) or "none registered"
-    raise DatasetNotFoundError(  # one line (issue 12), however long
+    raise DatasetNotFoundError(  # one line, however long
         f"sequence {str(spec)!r} not found (data root {root}; families: {known}); looked in "
         f"{places}; {_layouts_and_sources(candidates)}"
     )

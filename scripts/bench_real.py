@@ -19,15 +19,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
-import os
-import platform
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from benchmark_doc import machine_line, update_section
 from numpy.typing import NDArray
 
 from radar_slam.datasets import RadarFrame, open_sequence
@@ -156,18 +154,6 @@ def oxford_table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
-def machine() -> str:
-    """One line naming this machine."""
-    cpu = platform.processor() or platform.machine()
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        for line in cpuinfo.read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
-
-
 def run_all(root: Path) -> tuple[list[Row], list[Row], list[Row]]:
     """(Edinburgh rows, Oxford rows, fog rows)."""
     edinburgh = open_sequence(EDINBURGH, root)
@@ -185,13 +171,18 @@ def run_all(root: Path) -> tuple[list[Row], list[Row], list[Row]]:
     return real, ox, fog
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def real_data_parser(description: str) -> argparse.ArgumentParser:
+    """The options of the real-data scripts: --data-root and --write-doc."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--data-root", type=Path, default=DEFAULT_ROOT)
     parser.add_argument(
         "--write-doc", action="store_true", help="rewrite the table in docs/benchmarks.md"
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = real_data_parser(__doc__.splitlines()[0]).parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     real, oxford, fog = run_all(args.data_root)
     text = "\n\n".join(
@@ -207,11 +198,8 @@ def main(argv: list[str] | None = None) -> int:
             STATE_OF_THE_ART,
         ]
     )
-    print(f"machine: {machine()}\n\n{text}")
+    print(f"{machine_line('scripts/bench_real.py')}\n\n{text}")
     if args.write_doc:
-        sys.path.insert(0, str(Path(__file__).parent))
-        from benchmark_doc import update_section
-
         update_section("Real drives", text, script="scripts/bench_real.py")
     return 0
 

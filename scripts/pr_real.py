@@ -26,13 +26,13 @@ Usage: python scripts/pr_real.py [--data-root ../shared/data] [--write-doc]
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from bench_real import EDINBURGH, real_data_parser
+from benchmark_doc import machine_line, update_section
 from numpy.typing import NDArray
 
 from radar_slam.datasets import DatasetConfig, open_sequence
@@ -44,8 +44,6 @@ from raplace import DescriptorExtractor, RaPlaceConfig, ScanContextExtractor
 from raplace.scancontext import column_shift_distance
 from raplace.scoring import score, theta_spectrum
 
-DEFAULT_ROOT = Path(__file__).resolve().parents[2] / "shared" / "data"
-EDINBURGH = "radiate/edinburgh_2019-02-12-15-33"
 BANDS_M = ((0.0, 5.0), (5.0, 10.0))
 NEGATIVE_M = 50.0
 
@@ -156,18 +154,10 @@ def run(root: Path) -> tuple[str, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data-root", type=Path, default=DEFAULT_ROOT)
-    parser.add_argument(
-        "--write-doc", action="store_true", help="rewrite the table in docs/benchmarks.md"
-    )
-    args = parser.parse_args(argv)
+    args = real_data_parser(__doc__.splitlines()[0]).parse_args(argv)
     text, _ = run(args.data_root)
-    print(text)
+    print(f"{machine_line('scripts/pr_real.py')}\n\n{text}")
     if args.write_doc:
-        sys.path.insert(0, str(Path(__file__).parent))
-        from benchmark_doc import update_section
-
         update_section("Place recognition on real scans", text, script="scripts/pr_real.py")
     return 0
 

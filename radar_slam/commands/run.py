@@ -44,7 +44,7 @@ from radar_slam.pipeline import (
     run_odometry,
 )
 from radar_slam.results import check_output_root, check_result_location, write_result_dir
-from radar_slam.viewer import RerunViewer, import_rerun
+from radar_slam.viewer import SPAWN, RerunViewer, check_viewer_target, import_rerun
 
 MAP_FOLDER = "map"
 """The map every SLAM run writes into its result folder (`radar_slam.maps`, issue-13)."""
@@ -94,8 +94,9 @@ def run_command(
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
     check_output_root(out)
-    if viewer is not None:  # fail before any work when rerun-sdk is missing
+    if viewer is not None:  # fail before any work: rerun-sdk missing, no display, bad file
         import_rerun()
+        check_viewer_target(viewer)
     prior_map = None if map_path is None else Map.load(map_path)  # issue-13
     seq, settings = open_configured(sequence, data_root, config)
     seq, settings = reopen_with_bag_options(
@@ -107,10 +108,15 @@ def run_command(
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
     observer = None if viewer is None else RerunViewer(viewer, f"{seq.family}/{seq.name}")
-    with progress_bar(total, f"{seq.family}/{seq.name}") as update:
-        results = Pipeline(
-            seq, settings, max_frames=max_frames, progress=update, observer=observer
-        ).run()
+    try:
+        with progress_bar(total, f"{seq.family}/{seq.name}") as update:
+            results = Pipeline(
+                seq, settings, max_frames=max_frames, progress=update, observer=observer
+            ).run()
+    except BaseException:
+        if observer is not None:
+            observer.abandon()
+        raise
     joined = None if prior_map is None else join_session(results, seq, prior_map)  # issue-13
     results = results if joined is None else joined.results  # issue-13: in the map's frame
     joined_text: list[str] = []
@@ -126,6 +132,8 @@ def run_command(
     typer.echo(slam_summary(results), nl=False)
     typer.echo("".join(joined_text), nl=False)  # issue-13: run --map
     typer.echo(f"results in {folder}")
+    if viewer is not None and viewer != SPAWN:
+        typer.echo(f"viewer recording in {viewer}")
 
 
 def odometry_command(

@@ -109,9 +109,26 @@ def write_loops_csv(path: Path, loops: list[LoopDecision], true_loops: list[bool
             )
 
 
+def finite_json(value: Any) -> Any:
+    """`value` with every NaN or infinite float (also inside lists and dicts) made None, so that
+    it is valid JSON (null) rather than a bare NaN."""
+    if isinstance(value, dict):
+        return {key: finite_json(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_json(item) for item in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def json_text(content: Any) -> str:
+    """Strict, indented JSON (non-finite numbers as null) with a trailing newline."""
+    return json.dumps(finite_json(content), indent=2, allow_nan=False) + "\n"
+
+
 def write_json(path: Path, content: dict[str, Any]) -> None:
-    """Indented JSON with a trailing newline."""
-    Path(path).write_text(json.dumps(content, indent=2) + "\n")
+    """Indented strict JSON with a trailing newline (non-finite numbers as null)."""
+    Path(path).write_text(json_text(content))
 
 
 def _fmt(value: float | int | None, spec: str, unit: str = "") -> str:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from enum import Enum
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from radar_slam.evaluation.metrics import (
     TrajectoryMetrics,
     evaluate,
 )
+from radar_slam.outputs import json_text
 from radar_slam.results import check_output_file, write_text_atomically
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
 from raplace.units import NS_PER_MS
@@ -152,7 +152,7 @@ def eval_command(
             f"{min(KITTI_SEGMENT_LENGTHS_M):.0f} m between matched poses; shown as n/a"
         )
     if json_path is not None:
-        write_text_atomically(json_path, json.dumps(metrics_json(results), indent=2) + "\n")
+        write_text_atomically(json_path, json_text(metrics_json(results)))
         typer.echo(f"wrote {json_path}")
 
 

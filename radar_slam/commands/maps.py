@@ -7,7 +7,6 @@ exit code 1). `localize` writes a result folder (`--out`, or
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -25,6 +24,7 @@ from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import Map
 from radar_slam.maps.localizer import Localization, Localizer
 from radar_slam.maps.writers import localization_summary, map_info, write_localization
+from radar_slam.outputs import json_text
 from radar_slam.pipeline import frame_count, ground_truth_of, open_configured, sequence_label
 from radar_slam.results import check_output_root, check_result_location, write_result_dir
 
@@ -77,7 +77,7 @@ def info_command(
     """Print a map's sessions, keyframes, extent, size and GT alignment."""
     info = map_info(map_path, Map.load(map_path))
     if as_json:
-        typer.echo(json.dumps(info, indent=2))
+        typer.echo(json_text(info), nl=False)
         return
     alignment = info["gt_alignment"]
     lines = [f"map           {map_path}"]

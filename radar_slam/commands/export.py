@@ -17,7 +17,7 @@ from radar_slam.commands.bag_options import (
     GT_TOPIC_OPTION,
     LAYOUT_OPTION,
     TOPIC_OPTION,
-    reopen_with_bag_options,
+    bag_overrides,
 )
 from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.errors import ResultsError
@@ -71,10 +71,8 @@ def export_command(
         write_trajectories_bag(trajectories, bag, chosen)
         typer.echo(f"{', '.join(trajectories)} trajectories of {folder} -> {bag}")
         return
-    seq, settings = open_configured(sequence, data_root, config)
-    seq, settings = reopen_with_bag_options(
-        sequence, data_root, seq, settings, topic, gt_topic, layout
-    )
+    bag_options = bag_overrides(topic, gt_topic, layout)
+    seq, settings = open_configured(sequence, data_root, config, bag_options)
     total = len(seq) if max_frames is None else min(max_frames, len(seq))
     with tqdm(total=total, desc=f"{seq.family}/{seq.name}", unit="scan") as bar:
         written = write_sequence_bag(

@@ -16,7 +16,7 @@ from radar_slam.commands.bag_options import (
     GT_TOPIC_OPTION,
     LAYOUT_OPTION,
     TOPIC_OPTION,
-    reopen_with_bag_options,
+    bag_overrides,
 )
 from radar_slam.commands.options import (
     CONFIG_OPTION,
@@ -98,10 +98,8 @@ def run_command(
         import_rerun()
         check_viewer_target(viewer)
     prior_map = None if map_path is None else Map.load(map_path)  # issue-13
-    seq, settings = open_configured(sequence, data_root, config)
-    seq, settings = reopen_with_bag_options(
-        sequence, data_root, seq, settings, topic, gt_topic, layout
-    )
+    bag_options = bag_overrides(topic, gt_topic, layout)
+    seq, settings = open_configured(sequence, data_root, config, bag_options)
     seq = strided(seq, stride)
     check_result_location(seq.family, seq.name, out)  # before the run, not after it
     if no_loops:
@@ -150,10 +148,8 @@ def odometry_command(
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
     check_output_root(out)
-    seq, settings = open_configured(sequence, data_root, config)
-    seq, settings = reopen_with_bag_options(
-        sequence, data_root, seq, settings, topic, gt_topic, layout
-    )
+    bag_options = bag_overrides(topic, gt_topic, layout)
+    seq, settings = open_configured(sequence, data_root, config, bag_options)
     seq = strided(seq, stride)
     check_result_location(seq.family, seq.name, out)
     total = frame_count(seq, max_frames)

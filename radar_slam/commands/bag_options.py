@@ -27,6 +27,7 @@ LAYOUT_OPTION = typer.Option(
     "azimuth_direction, range_resolution_m) go in the dataset: section of --config.",
 )
 
+
 def bag_overrides(
     topic: str | None, gt_topic: str | None, layout: str | None
 ) -> dict[str, Any] | None:

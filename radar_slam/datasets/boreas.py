@@ -211,7 +211,8 @@ class BoreasSequence:
     def ground_truth(self) -> NDArray[np.float64] | None:
         """(N, 3) T_enu_radar (easting, northing, heading) at each scan time; None without GT.
 
-        Rows are NaN for scans more than 0.5 s outside the time span of `radar_poses.csv`.
+        Rows are NaN for scans outside the time span of `radar_poses.csv` or inside an outage of
+        it (`interpolate_poses`).
         """
         if self.gt_path is None:
             return None
@@ -220,7 +221,8 @@ class BoreasSequence:
         missing = int(np.isnan(result[:, 0]).sum())
         if missing:
             logger.warning(
-                "%s: %d of %d scans lie outside its time span; their ground truth is NaN",
+                "%s: %d of %d scans lie outside its time span or in an outage of it; their ground "
+                "truth is NaN",
                 self.gt_path,
                 missing,
                 len(self),

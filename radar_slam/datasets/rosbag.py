@@ -17,7 +17,7 @@ Bags written by `radar-slam export` carry a `std_msgs/String` topic `/radar_slam
 (JSON: layout, range resolution, sensor, scan and GT topics), so they need no options. Ground
 truth comes from a `nav_msgs/Odometry` or `geometry_msgs/PoseStamped` topic (`gt_topic`): its
 (x, y, yaw) poses, taken as radar poses in their world frame, are interpolated to the scan times
-(exact at equal stamps; NaN more than 0.5 s outside their span).
+(exact at equal stamps; NaN outside their span or in an outage of it).
 
 Frames load lazily: opening indexes the scan messages (one pass reading their headers) and each
 `__getitem__` seeks to one message.

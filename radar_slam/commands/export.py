@@ -2,8 +2,9 @@
 
 SEQ is anything `run` accepts (family/name, a folder, a bag), written as scans plus ground truth;
 or a result folder of `run` / `odometry` (holding odometry.tum), whose TUM trajectories are
-written as nav_msgs/Odometry and nav_msgs/Path. OUT ending in `.bag` is a ROS 1 bag, anything
-else a ROS 2 bag folder (`--storage mcap` or `sqlite3`). The layout is in `radar_slam.rosbag_out`.
+written as nav_msgs/Odometry and nav_msgs/Path. OUT ending in `.bag` is a ROS 1 bag (`.BAG` is
+refused), anything else a ROS 2 bag folder (`--storage mcap` or `sqlite3`). The layout is in
+`radar_slam.rosbag_out`. A killed export's hidden leftovers are removed by the next one.
 """
 
 from __future__ import annotations
@@ -22,7 +23,12 @@ from radar_slam.commands.bag_options import (
 from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.errors import ResultsError
 from radar_slam.pipeline import open_configured
-from radar_slam.rosbag_out import Storage, write_sequence_bag, write_trajectories_bag
+from radar_slam.rosbag_out import (
+    Storage,
+    check_bag_out,
+    write_sequence_bag,
+    write_trajectories_bag,
+)
 from radar_slam.trajectory import read_tum
 
 TRAJECTORY_FILES = ("odometry", "slam", "gt")
@@ -59,8 +65,7 @@ def export_command(
     if storage not in ("mcap", "sqlite3"):
         raise ResultsError(f"--storage {storage!r}: choose mcap or sqlite3")
     chosen: Storage = "mcap" if storage == "mcap" else "sqlite3"
-    if bag.exists() or bag.is_symlink():
-        raise ResultsError(f"{bag}: exists already; choose another --bag (never overwritten)")
+    check_bag_out(bag)
     folder = Path(sequence)
     if is_result_folder(folder):
         trajectories = {

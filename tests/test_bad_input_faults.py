@@ -6,16 +6,14 @@ is refused with one line (and replaced by `simulate --force`)."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from bad_input_support import assert_one_line_error, run_cli
+from bad_input_support import assert_one_line_error, run_cli, start
 
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
@@ -27,24 +25,6 @@ TIMEOUT_S = 120.0
 RUN_FRAMES = "6"
 # the killed "running" case: the whole of `tiny`, so that writing starts seconds after the kill
 RUNNING_FRAMES = "60"
-
-
-def _default_sigint() -> None:
-    # A test runner started as a background job inherits SIGINT ignored, and so would the
-    # child: restore the default so that SIGINT acts as Ctrl-C in a terminal.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def start(args: list[str | Path], cwd: Path) -> subprocess.Popen[bytes]:
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    return subprocess.Popen(
-        [sys.executable, "-m", "radar_slam.cli", *map(str, args)],
-        cwd=cwd,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        preexec_fn=_default_sigint,
-    )
 
 
 def kill_when(

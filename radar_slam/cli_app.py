@@ -15,7 +15,7 @@ from typer._click.exceptions import ClickException, NoArgsIsHelpError, UsageErro
 from odometry import OdometryError
 from radar_slam import __version__
 from radar_slam.errors import RadarSlamError
-from radar_slam.signals import interrupted
+from radar_slam.signals import SIGINT_EXIT_CODE, interrupted
 from radar_slam.viewer import viewer_argv
 from raplace import RaPlaceError
 
@@ -90,6 +90,8 @@ def run_app(argv: list[str]) -> int:
     except (RadarSlamError, RaPlaceError, OdometryError) as exc:
         typer.echo(f"radar-slam: error: {exc}", err=True)
         return 1
+    if code == SIGINT_EXIT_CODE:  # Typer's answer to a KeyboardInterrupt in a command
+        return interrupted()
     return code if isinstance(code, int) else 0
 
 

@@ -128,6 +128,14 @@ def point_latest(folder: Path) -> None:
     os.replace(temporary, latest)
 
 
+def final_of_staging(staging: Path) -> Path:
+    """The final path of a hidden staging folder `.<name>.partial-<pid>` (`write_result_dir`
+    renames it there), for writers that record paths inside the folder they fill."""
+    staging = Path(staging)
+    name = staging.name.removeprefix(".").rsplit(PARTIAL_SUFFIX, 1)[0]
+    return staging.parent / name
+
+
 def write_result_dir(
     family: str,
     sequence: str,

@@ -3,8 +3,10 @@ one line on stderr and no traceback, whenever it arrives (while the modules load
 
 SIGTERM is turned into the same `KeyboardInterrupt` as Ctrl-C, so that every clean-up written
 for an interruption (temporary folders, partial files) runs for it too; `interrupted()` then
-tells the two apart by the signal that arrived. Only `radar_slam.cli` installs the handlers: the
-library never touches signals.
+tells the two apart by the signal that arrived. Only `radar_slam.cli` installs the handlers;
+the library only starts helper processes (batch's Dask workers) deaf to SIGINT
+(`children_ignore_sigint`), since a Ctrl-C in a terminal reaches every process of the group and
+the parent ends them itself.
 """
 
 from __future__ import annotations
@@ -12,7 +14,8 @@ from __future__ import annotations
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from types import FrameType
 from typing import Any
 
@@ -52,6 +55,17 @@ def restore(previous: Handlers) -> None:
     """Put back the handlers `install` replaced (when `main` is called inside a program)."""
     for signum, handler in previous.items():
         signal.signal(signum, handler)
+
+
+@contextmanager
+def children_ignore_sigint() -> Iterator[None]:
+    """Processes started inside this block never see SIGINT (it is blocked, and a blocked-signal
+    mask is inherited); a Ctrl-C meanwhile reaches this process when the block ends."""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def was_interrupted() -> bool:

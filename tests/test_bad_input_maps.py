@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 from collections.abc import Callable
 from pathlib import Path
 
@@ -125,3 +126,21 @@ def test_map_info_json_is_strict_json(workdir: Path, capsys: pytest.CaptureFixtu
     assert outcome.code == 0, outcome.stderr
     info = json.loads(outcome.stdout, parse_constant=lambda name: pytest.fail(name))
     assert info["extent_m"] == [16.0, 0.0]
+
+
+def test_localize_records_the_descriptor_it_runs_with(caplog: pytest.LogCaptureFixture) -> None:
+    """A config asking for n_theta 60 against a map made with 120: 120 runs, so 120 is what
+    the settings (and config.yaml) say, and a warning names the change."""
+    from radar_slam.maps.localizer import settings_for_map
+    from radar_slam.pipeline import load_config
+    from radar_slam.pipeline.config import PipelineConfig
+
+    asked = load_config(
+        "synthetic", overrides={"loop_closure": {"raplace": {"descriptor": {"n_theta": 60}}}}
+    )
+    m = small_map(settings={"descriptor": {"n_theta": 120}})
+    with caplog.at_level(logging.WARNING):
+        used = settings_for_map(asked, m)
+    assert isinstance(used, PipelineConfig)
+    assert used.loop_closure.raplace.descriptor.n_theta == 120
+    assert "n_theta 60 -> 120" in caplog.text

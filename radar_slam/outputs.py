@@ -206,7 +206,7 @@ def write_results(folder: Path, results: Results) -> list[Path]:
     slam = aligned_to(results.slam, gt)
     curves = {"odometry": aligned_to(results.odometry, gt), "slam": slam}
     if gt is not None:
-        write_tum(folder / GT_FILE, gt)
+        write_trajectory(folder, "gt", gt)  # gt.tum and gt.kitti
         curves = {"gt": gt, **curves}
     write_loops_csv(folder / LOOPS_FILE, results.loops, results.true_loops)
     write_pose_graph(folder / GRAPH_FILE, results.graph)
@@ -252,7 +252,7 @@ def write_odometry_results(folder: Path, run: OdometryRun) -> list[Path]:
     write_json(folder / METRICS_FILE, run.summary())
     (folder / SUMMARY_FILE).write_text(odometry_summary(run))
     if run.ground_truth is not None:
-        write_tum(folder / GT_FILE, run.ground_truth)
+        write_trajectory(folder, "gt", run.ground_truth)
         plot_trajectories(
             folder / PLOT_FILE,
             {"gt": run.ground_truth, "odometry": aligned_to(run.trajectory, run.ground_truth)},

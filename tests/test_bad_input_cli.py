@@ -301,6 +301,14 @@ CASES: dict[str, Setup] = {
         ],
         ["a.tum"],
     ),
+    "eval: a g2o pose graph": lambda w, r: (
+        [
+            "eval",
+            _tum(w, "out.g2o", "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"),
+            _tum(w, "b.tum", TUM_OK),
+        ],
+        ["out.g2o", "g2o pose graph", "no timestamps"],
+    ),
     "eval: not UTF-8": lambda w, r: (
         ["eval", _bytes(w / "a.tum", b"\xff\xfe\x00 1\n"), _tum(w, "b.tum", TUM_OK)],
         ["a.tum"],

@@ -61,6 +61,9 @@ def test_scans_past_the_gt_have_none_and_ate_equals_the_full_gt_one(
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
     assert metrics["scans_with_gt"] == COVERED
     assert metrics["scans_without_gt"] == FRAMES - COVERED
+    assert len(read_tum(tmp_path / "res" / "gt.tum")) == len(
+        (tmp_path / "res" / "gt.kitti").read_text().splitlines()
+    )  # gt.kitti too, for `eval --format kitti`
     summary = (tmp_path / "res" / "summary.txt").read_text()
     assert f"accuracy over {COVERED} of {FRAMES} scans ({FRAMES - COVERED} without" in summary
 

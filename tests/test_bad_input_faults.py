@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -157,3 +158,22 @@ def test_interrupted_writer_leaves_nothing(tmp_path: Path, monkeypatch: pytest.M
     with pytest.raises(KeyboardInterrupt):
         write_result_dir("f", "s", half_then_interrupt, out=out)
     assert not out.exists() and not list(tmp_path.glob(".out*"))
+
+
+def test_next_writer_removes_a_killed_writers_leftovers(tmp_path: Path) -> None:
+    """`.<name>.partial-<pid>` of a dead process is removed by the next writer of <name>; other
+    names' leftovers are not its business."""
+    from radar_slam.results import write_text_atomically
+
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
+    mine = tmp_path / f".m.json{PARTIAL_SUFFIX}{dead}"
+    other = tmp_path / f".other.g2o{PARTIAL_SUFFIX}{dead}"
+    mine.write_text("half")
+    other.write_text("half")
+    write_text_atomically(tmp_path / "m.json", "{}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [other.name, "m.json"]

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
 from radar_slam.maps.validate import map_content_problem
+from radar_slam.results import PARTIAL_SUFFIX, remove_stale_partials
 
 FORMAT_NAME = "radar-slam-map"
 FORMAT_VERSION = 1
@@ -212,7 +213,8 @@ def write_map(path: Path, m: Map) -> None:
         raise MapError(f"{path}: exists already; a map is written into a new folder")
     if len(m.descriptors) != len(m) or len(m.images) != len(m):
         raise MapError(f"{path}: keyframes, descriptors and images differ in number")
-    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    remove_stale_partials(path.parent, path.name)  # what a killed writer of it left
+    partial = path.with_name(f".{path.name}{PARTIAL_SUFFIX}{os.getpid()}")
     try:
         partial.mkdir(parents=True)
         for name, data in encode_map(m).items():

@@ -94,8 +94,7 @@ class RotationConfig:
             first. The first coarse translation is made at the Fourier-Mellin yaw, which locks
             toward zero for rotations below about a degree; its error leaks into a single
             refinement as a rotation error proportional to the rotation (see
-            `scripts/diagnose_rotation_bias.py`). 2 removes that error (the default since
-            stop 14, when the drives began to gain from it: docs/odometry_notes.md).
+            `tests/test_odometry_rotation_bias.py`). 2 removes that error (docs/decisions.md).
         refine_repeat_min_deg: the refinement is repeated only while its last correction was
             larger than this [deg] (the translation was made at a yaw off by that much).
     """
@@ -205,7 +204,7 @@ class QualityConfig:
         rotation bias); the two rotation terms are off (0): 0.1 and 1.25 make the odometry's own
         rotation covariances consistent in tight turns, but looser rotations in turns let the
         pose graph put the straight steps' rotation bias into the turns (SLAM ATE worse; the
-        covariance notes in docs/odometry_notes.md, `scripts/bench_nees.py`).
+        docs/decisions.md, `scripts/bench_nees.py`).
     """
 
     min_peak_quality: float = 6.0
@@ -311,13 +310,13 @@ class DeskewConfig:
             registered seeded with the first estimate; the strongest keeps its de-skew. The peak
             quality measures the sweep's yaw rate relative to the reference image's de-skew, so it
             matches the two images' distortions rather than finding the true yaw rate
-            (docs/odometry_notes.md, issue 10y).
+            (docs/method.md).
         yaw_rate_search_min_interval_s: the search runs at every scan whose image frame is at
             least this long [s] after the last one (a low frame rate: 1 Hz; at 4 Hz it is
             0.25 s, at 2 Hz 0.5 s), `yaw_rate_search_slow_rounds` rounds ...
         yaw_rate_search_slow_rounds: ... each round around the yaw rate the last one moved to
             (with a reference de-skewed right, three rounds put the sweep's rate within 2-3
-            deg/s rms on the simulator; docs/odometry_notes.md, stop 19).
+            deg/s rms on the simulator; docs/decisions.md).
         yaw_rate_search_min_gain: a searched de-skew replaces the kept one only when its peak
             quality is higher by more than this fraction.
         yaw_rate_search_weak_fraction: the search also runs, at any interval, on a registration
@@ -325,7 +324,7 @@ class DeskewConfig:
             e.g. through a yaw-rate reversal between two scans; 0: never).
         yaw_rate_search_weak_rounds: rounds of search for such a weak registration, each around
             the yaw rate the last one moved to (the vertex of one round reaches three half-widths;
-            three rounds reach further but did worse at a rate nothing was tuned at, stop 15).
+            three rounds reach further but did worse at a rate nothing was tuned at).
         keyframe_rate_change: at low frame rates (as above), a new keyframe is re-rendered at
             the mean yaw rate since the previous scan's image plus half the change of the rate
             between the two sweeps that their searches measured (against the previous scan, or

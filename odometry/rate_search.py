@@ -6,7 +6,7 @@ of yaw rates and registered against the same reference, the peak quality is high
 scan's de-skew matches the reference image's: it measures the sweep's yaw rate *relative to the
 reference's de-skew* (its error follows the reference's de-skew error), not the true one. Both
 images distorted alike register to a better relative motion than one distorted and one right
-(docs/odometry_notes.md, issue 10y), which is what this search buys. It runs where it can matter:
+(docs/method.md), which is what this search buys. It runs where it can matter:
 at every scan of a low frame rate (a long interval between the image frames), and on a
 registration whose peak is far weaker than the previous scan's. The second is how a de-skew far
 off shows at any rate: at 2 Hz, leaving a U-turn through a reversal from +30 to -30 deg/s, the
@@ -19,14 +19,13 @@ image (a 1 s mean misses a curvature change inside the second), but at `keyframe
 mean plus half the change between the two sweeps' rates that the search measured. The yaw step
 between the two images gives the sum of the two sweeps' rates, the search their difference, so
 the keyframe's rate does not carry the reference's error (where the yaw rate is linear between
-the two sweeps), and the next scan's search matches it (docs/odometry_notes.md, stop 19). When
+the two sweeps), and the next scan's search matches it (docs/decisions.md). When
 the previous scan was not a keyframe, both scans were searched against the same keyframe: the
-difference of their two searched rates is the change, and the reference's error cancels in it
-(stop 20).
+difference of their two searched rates is the change, and the reference's error cancels in it.
 
 `step_searched` goes one step further where the yaw rate changed: a curvature step inside a sweep
 is a step of the yaw rate, which no constant de-skew follows (both sides of the step turn the
-image the same way; docs/odometry_notes.md). The scan is de-skewed with the rate before (the
+image the same way; docs/method.md). The scan is de-skewed with the rate before (the
 previous step's) up to a searched time and a rate after it that keeps the yaw measured since the
 previous image, and the time whose image correlates most strongly wins
 (`DeskewConfig.rate_step_*`). It runs only where that model holds: after a steady yaw rate, on

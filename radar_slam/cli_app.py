@@ -28,7 +28,7 @@ COMMAND_MODULES = (
     "loops",
     "export",
     "batch",
-    "maps",  # issue-13
+    "maps",
 )
 
 app = typer.Typer(
@@ -78,7 +78,7 @@ def run_app(argv: list[str]) -> int:
     except NoArgsIsHelpError as exc:
         exc.show()
         return exc.exit_code
-    except UsageError as exc:  # a bad option or argument: one line too (issue 12)
+    except UsageError as exc:  # a bad option or argument: one line too
         command = exc.ctx.command_path if exc.ctx is not None else "radar-slam"
         typer.echo(f"radar-slam: error: {command}: {_one_line(exc.format_message())}", err=True)
         return 1

@@ -29,7 +29,12 @@ import numpy as np
 
 from radar_slam.config import write_yaml
 from radar_slam.errors import TrajectoryError
-from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
+from radar_slam.evaluation.metrics import (
+    KITTI_SEGMENT_LENGTHS_M,
+    TrajectoryMetrics,
+    associate,
+    umeyama_alignment_se2,
+)
 from radar_slam.g2o import write_pose_graph
 from radar_slam.loops import LoopDecision
 from radar_slam.pipeline.records import OdometryRun, Results
@@ -145,6 +150,12 @@ def gt_coverage(with_gt: int | None, frames: int) -> str:
     )
 
 
+def _drift_segments(m: TrajectoryMetrics | None) -> str:
+    """The KITTI segment lengths the drift averages over, e.g. "400-800 m"."""
+    shortest = KITTI_SEGMENT_LENGTHS_M[0] if m is None else m.drift_min_segment_m
+    return f"{shortest:.0f}-{KITTI_SEGMENT_LENGTHS_M[-1]:.0f} m"
+
+
 def slam_summary(results: Results) -> str:
     """A few lines for humans (summary.txt and the terminal)."""
     m = results.metrics
@@ -162,10 +173,15 @@ def slam_summary(results: Results) -> str:
             f"(reduction {_fmt(reduction, '.1f', ' %')}; Umeyama-aligned)",
             f"ATE origin    odometry {_fmt(m.ate_origin_odometry_m, '.3f', ' m')}, "
             f"SLAM {_fmt(m.ate_origin_slam_m, '.3f', ' m')} (first pose aligned)",
+            f"end point     odometry {_fmt(m.end_point_odometry_pct, '.2f', ' %')}, "
+            f"SLAM {_fmt(m.end_point_slam_pct, '.2f', ' %')} of the distance (aligned)",
             f"drift         odometry {_fmt(m.drift_odometry_pct, '.2f', ' %')}, "
-            f"SLAM {_fmt(m.drift_slam_pct, '.2f', ' %')} (KITTI segments 100-800 m)",
+            f"SLAM {_fmt(m.drift_slam_pct, '.2f', ' %')} "
+            f"(KITTI segments {_drift_segments(results.odometry_metrics)})",
             gt_coverage(m.scans_with_gt, m.frames),
         ]
+        if results.gt_report is not None:
+            lines += results.gt_report.summary_lines()
     else:
         lines.append("accuracy      n/a (no ground truth, or fewer than 2 scans with it)")
     timings = ", ".join(f"{k} {v:.1f} s" for k, v in results.timings_s.items())
@@ -210,7 +226,10 @@ def write_results(folder: Path, results: Results) -> list[Path]:
         curves = {"gt": gt, **curves}
     write_loops_csv(folder / LOOPS_FILE, results.loops, results.true_loops)
     write_pose_graph(folder / GRAPH_FILE, results.graph)
-    write_json(folder / METRICS_FILE, results.metrics.to_dict())
+    metrics: dict[str, Any] = dict(results.metrics.to_dict())
+    if results.gt_report is not None:
+        metrics["ground_truth"] = results.gt_report.to_dict()
+    write_json(folder / METRICS_FILE, metrics)
     (folder / SUMMARY_FILE).write_text(slam_summary(results))
     plot_trajectories(
         folder / PLOT_FILE,
@@ -237,10 +256,14 @@ def odometry_summary(run: OdometryRun) -> str:
         lines += [
             f"ATE           {m.ate_rmse_m:.3f} m (Umeyama-aligned), "
             f"{m.ate_origin_rmse_m:.3f} m (first pose aligned)",
+            f"end point     {_fmt(m.end_point_error_pct, '.2f', ' %')} of the distance (aligned)",
             f"drift         {_fmt(m.drift_trans_pct, '.2f', ' %')}, "
-            f"{_fmt(m.drift_rot_deg_per_100m, '.3f', ' deg/100 m')} (KITTI segments 100-800 m)",
+            f"{_fmt(m.drift_rot_deg_per_100m, '.3f', ' deg/100 m')} "
+            f"(KITTI segments {_drift_segments(m)})",
             gt_coverage(m.poses_matched, data["frames"]),
         ]
+        if run.gt_report is not None:
+            lines += run.gt_report.summary_lines()
     return "\n".join(lines) + "\n"
 
 

@@ -178,7 +178,7 @@ class RerunViewer:
         gt = self._gt(pipeline, result.index)
         if gt is not None:
             self.stream.log("world/gt", self._strip(gt, "gt"))
-        tally = pipeline.loops.tally()  # issue-15: as the graph has seen it
+        tally = pipeline.loops.tally()  # as the graph has seen it
         if tally != self._tally:
             self._tally = tally
             slam = pipeline.graph.estimates()

@@ -13,7 +13,10 @@ and the reverse-direction pair `synthetic/multisession_reverse_a:..._b`):
    ATE of its trajectory in the map frame against GT through the map's alignment only (no
    re-alignment), inter-session loops accepted / true, and the extended map's round trip.
 
+`--write-doc` writes the bars as a table into docs/benchmarks.md.
+
 Usage: python scripts/bench_maps.py [MAP_SEQ:QUERY_SEQ ...] [--data-root DIR] [--json OUT]
+       [--write-doc]
 """
 
 from __future__ import annotations
@@ -120,11 +123,72 @@ def report(row: dict[str, Any]) -> str:
     )
 
 
+DOC_SECTION = "Maps"
+"""The section of docs/benchmarks.md this script writes with `--write-doc`."""
+
+
+def doc_table(rows: list[dict[str, Any]]) -> str:
+    """The bars as a Markdown table, one column per session pair."""
+    header = ["bar", *(f"`{r['pair'].replace(':', '` -> `')}`" for r in rows)]
+    lines = []
+    for label, cell in (
+        (
+            "scans within 10 m of the map's route placed within 1 m and 2 deg of GT (>= 95 %)",
+            lambda r: (
+                f"{100 * r['localization']['near_route_correct']:.1f} % "
+                f"(of {r['localization']['near_route_scans']})"
+            ),
+        ),
+        (
+            "scans reported localised more than 5 m off (0)",
+            lambda r: (
+                f"{r['localization']['wrong_localised']} "
+                f"(max error {r['localization']['max_error_m']:.2f} m)"
+            ),
+        ),
+        (
+            "lateral / longitudinal RMS error",
+            lambda r: (
+                f"{r['localization']['lateral_rmse_m']:.3f} / "
+                f"{r['localization']['longitudinal_rmse_m']:.3f} m"
+            ),
+        ),
+        (
+            "localisation speed, one core (>= 20 scans/s)",
+            lambda r: f"{r['localization_scans_per_s_wall']:.1f} scans/s",
+        ),
+        (
+            "`run --map`: ATE in the map frame, not re-aligned (<= 1.0 m)",
+            lambda r: f"{r['multisession']['ate_map_frame_m']} m",
+        ),
+        (
+            "`run --map`: accepted inter-session loops true",
+            lambda r: (
+                f"{r['multisession']['intersession_accepted_true']} of "
+                f"{r['multisession']['intersession_accepted']}"
+            ),
+        ),
+        (
+            "map saved, loaded, saved again byte-identical",
+            lambda r: "yes" if r["round_trip_identical"] else "no",
+        ),
+        (
+            "map size",
+            lambda r: f"{r['map_keyframes']} keyframes, {r['map_bytes'] / 1e6:.2f} MB",
+        ),
+    ):
+        lines.append([label, *(cell(r) for r in rows)])
+    from benchmark_doc import markdown_table
+
+    return markdown_table(header, lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("pairs", nargs="*", default=list(DEFAULT_PAIRS))
     parser.add_argument("--data-root", type=Path, default=None)
     parser.add_argument("--json", type=Path, default=None, help="write the figures as JSON here")
+    parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
     args = parser.parse_args()
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     cv2.setNumThreads(1)
@@ -135,6 +199,10 @@ def main() -> None:
         print(report(rows[-1]), flush=True)
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
+    if args.write_doc:
+        from benchmark_doc import update_section
+
+        update_section(DOC_SECTION, doc_table(rows), script="scripts/bench_maps.py")
 
 
 if __name__ == "__main__":

@@ -14,12 +14,13 @@ Two benchmarks:
   (register() only, frame loading excluded), gaps and the longest run of consecutive gaps. With
   `--stride K` (repeatable) every sequence also runs on every K-th scan (4 Hz data at 2 or 1 Hz);
   `--held-out SEQ` sequences are reported in their own part of the table (never tune on them);
-  `--table FILE` writes the Markdown table (scenarios x strides) that the README shows.
+  `--table FILE` writes the Markdown table (scenarios x strides) to a file, `--write-doc` into
+  docs/benchmarks.md (the speed benchmark writes its own section there too).
 
 Usage: python scripts/bench_odometry.py [--frames N] [--speed MPS] [--yaw-rate DPS] [--scan PNG]
        python scripts/bench_odometry.py --sequence synthetic/loop --sequence synthetic/long
            [--held-out SEQ] [--stride 1 --stride 2 --stride 4] [--table FILE]
-           [--data-root DIR] [--max-frames N] [--config FILE.yaml]
+           [--data-root DIR] [--max-frames N] [--config FILE.yaml] [--write-doc]
 """
 
 from __future__ import annotations
@@ -301,6 +302,11 @@ def markdown_table(rows: list[SequenceRow]) -> str:
     return "\n".join(lines) + "\n"
 
 
+ACCURACY_SECTION = "Odometry on the synthetic drives"
+SPEED_SECTION = "Odometry speed"
+"""The sections of docs/benchmarks.md this script writes with `--write-doc`."""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=40, help="frames to register")
@@ -327,6 +333,7 @@ def main() -> None:
         help="use every K-th scan (repeatable: one table line per stride; default 1)",
     )
     parser.add_argument("--table", type=Path, default=None, help="write the Markdown table here")
+    parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
     parser.add_argument("--data-root", type=Path, default=None, help="data root for --sequence")
     parser.add_argument("--max-frames", type=int, default=None, help="frames per --sequence")
     parser.add_argument(
@@ -357,6 +364,10 @@ def main() -> None:
             tmp = args.table.with_name(args.table.name + ".tmp")
             tmp.write_text(table)
             tmp.replace(args.table)
+        if args.write_doc:
+            from benchmark_doc import update_section
+
+            update_section(ACCURACY_SECTION, table, script="scripts/bench_odometry.py")
         return
 
     world = world_scan(args.scan)
@@ -401,6 +412,16 @@ def main() -> None:
         100.0 * np.hypot(*errors[-1, :2]) / max(distance, 1e-9),
         np.rad2deg(errors[-1, 2]),
     )
+    if args.write_doc:
+        from benchmark_doc import update_section
+
+        speed = (
+            "| what | mean | p95 | frames/s |\n|---|---|---|---|\n"
+            f"| odometry, {len(frames)} frames of {world.shape[0]} x {world.shape[1]}, "
+            f"{args.speed:g} m/s, {args.yaw_rate:g} deg/s | {ms.mean():.1f} ms "
+            f"| {np.percentile(ms, 95):.1f} ms | {1e3 / ms.mean():.0f} |"
+        )
+        update_section(SPEED_SECTION, speed, script="scripts/bench_odometry.py")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Odometry CPU cost per scan on one thread, optionally side by side with a baseline source tree.
+"""Odometry CPU cost per scan on one thread.
 
 `Odometry.register` is run over each sequence with one thread (`cv2.setNumThreads(1)`,
 `OPENBLAS_NUM_THREADS=1`); the process CPU time (`time.process_time`, robust to other processes
@@ -6,14 +6,11 @@ on a shared machine, unlike wall-clock time) of every call after the first two (
 summed, frame reading excluded.
 Drift and ATE against the ground truth are reported too.
 
-With `--baseline DIR` (a checkout of another commit, e.g. made with
-`git worktree add --detach DIR COMMIT`), each sequence is also run with DIR's packages first on
-PYTHONPATH, alternating the two in child processes (`--repeat` rounds) so that both see the same
-load; the table then shows both costs, their ratio and the largest pose difference between the
-two runs (0 when the results are bit-identical).
+Each sequence runs in a child process (`--repeat` rounds; the table keeps the lowest cost of
+the rounds). `--write-doc` writes the table into docs/benchmarks.md.
 
-Usage: python scripts/bench_odometry_cpu.py SEQ [SEQ ...] [--baseline DIR] [--repeat N]
-           [--max-frames N] [--data-root DIR]
+Usage: python scripts/bench_odometry_cpu.py SEQ [SEQ ...] [--repeat N] [--max-frames N]
+           [--data-root DIR] [--write-doc]
 """
 
 from __future__ import annotations
@@ -79,11 +76,9 @@ def run_sequence(spec: str, data_root: Path | None, max_frames: int | None, out:
     out.write_text(json.dumps(result))
 
 
-def child(spec: str, args: argparse.Namespace, source: Path | None, out: Path) -> dict:
-    """Run one sequence in a child process with `source` (a source tree) first on the path."""
+def child(spec: str, args: argparse.Namespace, out: Path) -> dict:
+    """Run one sequence in a child process on one thread."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    if source is not None:
-        env["PYTHONPATH"] = os.pathsep.join([str(source), *filter(None, [env.get("PYTHONPATH")])])
     command = [sys.executable, __file__, spec, "--child-out", str(out)]
     if args.max_frames is not None:
         command += ["--max-frames", str(args.max_frames)]
@@ -99,59 +94,50 @@ def _fmt(value: float | None, digits: int) -> str:
     return "n/a" if value is None else f"{value:.{digits}f}"
 
 
+DOC_SECTION = "Odometry CPU per scan"
+"""The section of docs/benchmarks.md this script writes with `--write-doc`."""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequences", nargs="+", help="family/sequence specs")
-    parser.add_argument("--baseline", type=Path, default=None, help="baseline source tree")
-    parser.add_argument("--repeat", type=int, default=1, help="alternating rounds per sequence")
+    parser.add_argument("--repeat", type=int, default=1, help="rounds per sequence (lowest kept)")
     parser.add_argument("--max-frames", type=int, default=None)
     parser.add_argument("--data-root", type=Path, default=None)
+    parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
     parser.add_argument("--child-out", type=Path, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.child_out is not None:
         run_sequence(args.sequences[0], args.data_root, args.max_frames, args.child_out)
         return
-    variants: list[tuple[str, Path | None]] = [("this tree", None)]
-    if args.baseline is not None:
-        variants.insert(0, ("baseline", args.baseline.resolve()))
     lines = [
-        "| sequence | variant | scans | CPU ms/scan | wall ms/scan | ATE [m] | drift [%] | gaps "
-        "| max pose diff |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| sequence | scans | CPU ms/scan | wall ms/scan | ATE [m] | drift [%] | gaps |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     with tempfile.TemporaryDirectory() as tmp:
         for spec in args.sequences:
-            runs: dict[str, list[dict]] = {name: [] for name, _ in variants}
+            results = []
             for round_index in range(args.repeat):
-                for name, source in variants:
-                    out = Path(tmp) / f"{name.replace(' ', '_')}_{round_index}.json"
-                    result = child(spec, args, source, out)
-                    logger.info(
-                        "%s %s round %d: %.2f ms/scan CPU",
-                        spec,
-                        name,
-                        round_index,
-                        result["cpu_ms_per_scan"],
-                    )
-                    runs[name].append(result)
-            first = runs[variants[0][0]][0]["poses"]
-            for name, _ in variants:
-                results = runs[name]
-                cpu = min(r["cpu_ms_per_scan"] for r in results)
-                wall = min(r["wall_ms_per_scan"] for r in results)
-                last = results[-1]
-                diff = float(np.max(np.abs(last["poses"] - first))) if len(first) else 0.0
-                lines.append(
-                    f"| `{spec}` | {name} | {last['frames']} | {cpu:.2f} | {wall:.2f} "
-                    f"| {_fmt(last['ate_m'], 4)} | {_fmt(last['drift_pct'], 4)} "
-                    f"| {last['gaps']} | {diff:.2e} |"
+                out = Path(tmp) / f"run_{round_index}.json"
+                result = child(spec, args, out)
+                logger.info(
+                    "%s round %d: %.2f ms/scan CPU", spec, round_index, result["cpu_ms_per_scan"]
                 )
-            if args.baseline is not None:
-                base = min(r["cpu_ms_per_scan"] for r in runs["baseline"])
-                this = min(r["cpu_ms_per_scan"] for r in runs["this tree"])
-                lines.append(f"| `{spec}` | ratio this/baseline | | {this / base:.3f} | | | | | |")
-    logger.info("\n%s", "\n".join(lines))
+                results.append(result)
+            cpu = min(r["cpu_ms_per_scan"] for r in results)
+            wall = min(r["wall_ms_per_scan"] for r in results)
+            last = results[-1]
+            lines.append(
+                f"| `{spec}` | {last['frames']} | {cpu:.2f} | {wall:.2f} "
+                f"| {_fmt(last['ate_m'], 4)} | {_fmt(last['drift_pct'], 4)} | {last['gaps']} |"
+            )
+    table = "\n".join(lines)
+    logger.info("\n%s", table)
+    if args.write_doc:
+        from benchmark_doc import update_section
+
+        update_section(DOC_SECTION, table, script="scripts/bench_odometry_cpu.py")
 
 
 if __name__ == "__main__":

@@ -17,8 +17,12 @@ more than 50 m from the query (ground truth) with a plausible measurement (a sma
 as confident as a good real loop) and ignores it otherwise; real candidates are verified as
 usual. The report compares the SLAM ATE with and without the injection.
 
+`--stride K` (repeatable) runs every sequence on every K-th scan too (4 Hz data at 1 Hz with 4);
+`--write-doc` writes one table line per sequence and stride (the first of `--workers`) into
+docs/benchmarks.md.
+
 Usage: python scripts/bench_pipeline.py [SEQ ...] [--workers 1 2] [--max-frames N]
-       [--inject-false F] [--json OUT]
+       [--stride K ...] [--inject-false F] [--json OUT] [--write-doc]
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ import numpy as np
 
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
+from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.false_loops import FalseLoopInjection
 from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
@@ -161,6 +166,25 @@ def _f(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3f}"
 
 
+DOC_SECTION = "SLAM on the synthetic drives"
+"""The section of docs/benchmarks.md this script writes with `--write-doc`."""
+DOC_HEADER = (
+    "| sequence | stride | cores | scans/s | odometry ATE [m] | SLAM ATE [m] | ratio "
+    "| loops accepted / true |\n|---|---|---|---|---|---|---|---|"
+)
+
+
+def doc_line(spec: str, stride: int, workers: int, results: Results) -> str:
+    """One line of the docs table."""
+    m = results.metrics
+    odometry, slam = m.ate_odometry_m, m.ate_slam_m
+    ratio = "n/a" if not odometry or slam is None else f"{slam / odometry:.2f}"
+    return (
+        f"| `{spec}` | {stride} | {workers} | {m.frames_per_second:.1f} | {_f(odometry)} "
+        f"| {_f(slam)} | {ratio} | {m.loops_accepted} / {m.loops_accepted_true} |"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequences", nargs="*", default=list(DEFAULT_SEQUENCES))
@@ -179,6 +203,10 @@ def main() -> None:
         "--inject-false", type=float, default=None, help="fraction of queries given a false loop"
     )
     parser.add_argument("--json", type=Path, default=None, help="write the rows as JSON")
+    parser.add_argument(
+        "--stride", type=int, action="append", default=[], help="every K-th scan; repeatable"
+    )
+    parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("odometry").setLevel(logging.ERROR)
@@ -188,17 +216,21 @@ def main() -> None:
     if len(cores) < max(args.workers):
         logger.warning("only %d core(s) available: the 2-worker run shares them", len(cores))
     rows = []
-    for spec in args.sequences:
-        sequence = open_sequence(spec, args.data_root)
+    doc_lines = []
+    for spec, stride in [(s, k) for s in args.sequences for k in args.stride or [1]]:
+        sequence = strided(open_sequence(spec, args.data_root), stride)
         base_config = load_config(sequence.family, args.config)
+        name = spec if stride == 1 else f"{spec} --stride {stride}"
         paired = []
         for workers in args.workers:
             use_cores(workers, cores)
             config = with_workers(base_config, workers)
             results, cpu = run_once(sequence, config, args.max_frames, None)[:2]
-            paired.append(report(f"{spec} ({workers} core{'s' * (workers > 1)})", results, cpu))
+            paired.append(report(f"{name} ({workers} core{'s' * (workers > 1)})", results, cpu))
+            if workers == args.workers[0]:
+                doc_lines.append(doc_line(spec, stride, workers, results))
         rows += paired
-        logger.info("%s\n%s", spec, side_by_side(paired))
+        logger.info("%s\n%s", name, side_by_side(paired))
         if args.inject_false is not None:
             injected, cpu, passed = run_once(sequence, config, args.max_frames, args.inject_false)
             row = report(f"{spec} + {args.inject_false:.0%} false", injected, cpu)
@@ -227,6 +259,11 @@ def main() -> None:
             rows.append(row)
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=2, default=float) + "\n")
+    if args.write_doc:
+        from benchmark_doc import update_section
+
+        table = "\n".join([DOC_HEADER, *doc_lines])
+        update_section(DOC_SECTION, table, script="scripts/bench_pipeline.py")
 
 
 if __name__ == "__main__":

@@ -7,9 +7,7 @@ odometry, no graph) and measures in process CPU time, so a busy machine does not
 - the rest of loop detection per scan (descriptor, place query, bookkeeping), without reading;
 - scan reading (the loader's decoding) per scan, for reference.
 
-`--json OUT` writes every verification (keys, decision, reason, measurement, qualities); with
-`--compare OTHER.json` (from another checkout, same sequence) the decisions and the largest
-measurement differences are printed, so a faster verifier can be shown to decide the same.
+`--json OUT` writes every verification (keys, decision, reason, measurement, qualities).
 
 `--odometry` also runs the odometry on the scans (timed apart) and hands each scan's conditioned
 form to the verifier before the detector sees it (`GeometricVerifier.offer`), as the pipeline
@@ -18,7 +16,7 @@ does, so the query scans are not conditioned again.
 `--profile N` runs the verifications under cProfile and prints the N functions with the most
 cumulative time per candidate (the profiler's overhead inflates the totals).
 
-Usage: python scripts/bench_verification.py [SEQ] [--max-frames N] [--json OUT] [--compare FILE]
+Usage: python scripts/bench_verification.py [SEQ] [--max-frames N] [--json OUT]
        [--odometry] [--profile N]
 """
 
@@ -84,44 +82,6 @@ class TimedVerifier:
         return result
 
 
-def compare(ours: list[dict[str, Any]], theirs: list[dict[str, Any]]) -> None:
-    """Print how two runs' verifications differ (decisions, reasons, measurements)."""
-    pairs = {(r["query"], r["match"]): r for r in theirs}
-    common = [
-        (r, pairs[(r["query"], r["match"])]) for r in ours if (r["query"], r["match"]) in pairs
-    ]
-    print(
-        f"compared {len(common)} common candidates (ours {len(ours)}, other {len(theirs)}); "
-        f"accepted ours {sum(r['ok'] for r in ours)}, other {sum(r['ok'] for r in theirs)}"
-    )
-    flips = [(a, b) for a, b in common if a["ok"] != b["ok"]]
-    print(f"  decisions differing: {len(flips)}")
-    for a, b in flips:
-        print(
-            f"    {a['query']} -> {a['match']}: ours {a['reason'] or 'ok'!r}, "
-            f"other {b['reason'] or 'ok'!r}"
-        )
-    for field in ("measurement", "sinogram"):
-        diffs = np.array(
-            [
-                np.subtract(a[field], b[field])
-                for a, b in common
-                if np.all(np.isfinite(a[field])) and np.all(np.isfinite(b[field]))
-            ]
-        ).reshape(-1, 3)
-        if len(diffs):
-            xy = np.hypot(diffs[:, 0], diffs[:, 1])
-            yaw = np.rad2deg(np.abs(np.angle(np.exp(1j * diffs[:, 2]))))
-            print(
-                f"  {field:<11s} max |dxy| {xy.max():.2e} m (median {np.median(xy):.1e}), "
-                f"max |dyaw| {yaw.max():.2e} deg over {len(diffs)}"
-            )
-    for field in ("sinogram_quality", "refined_quality"):
-        d = np.array([abs(a[field] - b[field]) for a, b in common])
-        if len(d):
-            print(f"  {field:<17s} max |diff| {d.max():.2e}")
-
-
 def print_profile(profiler: cProfile.Profile, candidates: int, rows: int) -> None:
     """The `rows` functions with the most cumulative verification time, in ms per candidate."""
     stats = pstats.Stats(profiler, stream=io.StringIO())
@@ -144,7 +104,6 @@ def main() -> None:
     parser.add_argument("sequence", nargs="?", default=DEFAULT_SEQUENCE)
     parser.add_argument("--max-frames", type=int, default=None)
     parser.add_argument("--json", type=Path, default=None, help="write the verifications here")
-    parser.add_argument("--compare", type=Path, default=None, help="verifications of another run")
     parser.add_argument("--odometry", action="store_true", help="hand over conditioned scans")
     parser.add_argument("--profile", type=int, default=0, help="print this many profile rows")
     args = parser.parse_args()
@@ -204,8 +163,6 @@ def main() -> None:
         print_profile(profiler, len(ms), args.profile)
     if args.json is not None:
         args.json.write_text(json.dumps(verifier.records))
-    if args.compare is not None:
-        compare(verifier.records, json.loads(args.compare.read_text()))
 
 
 if __name__ == "__main__":

@@ -5,13 +5,14 @@ Runs RaPlace and Scan Context on
   excluded);
 - synthetic/multisession_b queried against synthetic/multisession_a (multi-session);
 - optionally synthetic/long,
-at the given revisit criteria, and prints a Markdown table for the README with the bars of
-issue 4 (RaPlace max F1 >= 0.9 on loop and reverse at 20 m and above Scan Context on reverse;
+at the given revisit criteria, and prints a Markdown table with the bars
+(RaPlace max F1 >= 0.9 on loop and reverse at 20 m and above Scan Context on reverse;
 >= 0.85 multi-session). Sequences are generated on first use into the data root
-($RADAR_SLAM_DATA) and reused afterwards.
+($RADAR_SLAM_DATA) and reused afterwards. `--write-doc` writes the summary (max F1 / AUC at
+20 m) into docs/benchmarks.md; `--docs` copies the reverse-direction PR curve to docs/.
 
 Usage: python scripts/pr_benchmark.py [--scenarios loop reverse multisession] [--criteria 20]
-           [--config FILE] [--out DIR] [--docs]
+           [--config FILE] [--out DIR] [--docs] [--write-doc]
 """
 
 from __future__ import annotations
@@ -103,6 +104,24 @@ def table_rows(case: Case, criterion_m: float, report: dict) -> list[str]:
     return rows
 
 
+def summary_row(case: Case, report: dict) -> str:
+    """One line of the summary table: max F1 / AUC of each method."""
+    label = f"`{case.sequence}`"
+    if case.map_sequence is not None:
+        label += f" against `{case.map_sequence}`"
+    cells = [
+        f"{report[m]['max_f1']:.3f} / {report[m]['auc']:.3f}" if m in report else "n/a"
+        for m in METHOD_NAMES
+    ]
+    return f"| {label} | " + " | ".join(cells) + " |"
+
+
+DOC_SECTION = "Place recognition"
+"""The section of docs/benchmarks.md this script writes with `--write-doc`."""
+DOC_CURVE = "reverse"
+"""The scenario whose PR curve `--docs` copies to docs/ (the one docs/benchmarks.md shows)."""
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -113,8 +132,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--max-frames", type=int, default=None)
     parser.add_argument("--out", type=Path, default=None, help="folder for the pr results")
     parser.add_argument(
-        "--docs", action="store_true", help="copy each PR curve to docs/pr_<scenario>.png"
+        "--docs", action="store_true", help=f"copy the {DOC_CURVE} PR curve to docs/"
     )
+    parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
     args = parser.parse_args(argv)
     single_threaded()
     root = args.out or Path("results") / "pr_benchmark" / datetime.now().strftime("%Y%m%d_%H%M%S")
@@ -123,16 +143,26 @@ def main(argv: list[str] | None = None) -> None:
         "seconds | ms/frame | bar |",
         "| --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |",
     ]
+    summary = []
     for name in args.scenarios:
         case = CASES[name]
         for criterion_m in args.criteria:
             out = root / f"{name}_{criterion_m:g}m"
             report = run_case(case, criterion_m, out, args.config, args.max_frames)
             lines += table_rows(case, criterion_m, report)
-            if args.docs and criterion_m == BAR_CRITERION_M:
-                DOCS.mkdir(exist_ok=True)
-                shutil.copyfile(out / "pr_curve.png", DOCS / f"pr_{name}.png")
+            if criterion_m == BAR_CRITERION_M:
+                summary.append(summary_row(case, report))
+                if args.docs and name == DOC_CURVE:
+                    DOCS.mkdir(exist_ok=True)
+                    shutil.copyfile(out / "pr_curve.png", DOCS / f"pr_{name}.png")
     print("\n".join(lines))
+    if args.write_doc and summary:
+        from benchmark_doc import update_section
+
+        header = "| sequence | RaPlace max F1 / AUC | Scan Context max F1 / AUC |\n|---|---|---|"
+        intro = f"At the {BAR_CRITERION_M:g} m revisit criterion."
+        table = f"{intro}\n\n{header}\n" + "\n".join(summary)
+        update_section(DOC_SECTION, table, script="scripts/pr_benchmark.py")
     print(
         f"\nresults in {root}; seconds and ms/frame: descriptors, insertions and queries of "
         "every scan (map scans included), one thread, PNG reading excluded"

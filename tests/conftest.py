@@ -78,6 +78,8 @@ def metric_keys() -> frozenset[str]:
             "drift_trans_pct",
             "drift_rot_deg_per_100m",
             "poses_matched",
+            "end_point_error_pct",
+            "drift_min_segment_m",
         }
     )
 

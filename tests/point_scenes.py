@@ -3,7 +3,7 @@
 Each polar row (azimuth) sees every target from that row's own sensor pose, with a Gaussian
 beam in azimuth and a Gaussian point spread in range, so a scan of a rotated, translated or
 moving sensor is exact (no resampling of another scan, no fixed-point approximation of which
-azimuth sees a point). Used by the rotation-bias tests and `scripts/diagnose_rotation_bias.py`.
+azimuth sees a point). Used by the rotation-bias tests.
 
 Imported by name from the tests (pytest puts this folder on sys.path in its default import mode).
 """
@@ -15,7 +15,8 @@ from numpy.typing import NDArray
 
 from odometry.deskew import motion_from_twist
 from radar_slam.datasets.frame import RadarFrame
-from radar_slam.datasets.mulran import column_azimuths_rad, uniform_azimuth_times_ns
+from radar_slam.datasets.mulran import column_azimuths_rad
+from radar_slam.datasets.sweep import uniform_azimuth_times_ns
 from raplace import se2
 
 N_AZIMUTHS = 400
@@ -68,11 +69,13 @@ def render_polar(
     row_poses: NDArray[np.float64],
     n_bins: int = N_BINS,
     bin_m: float = BIN_M,
+    azimuths: NDArray[np.float64] | None = None,
 ) -> NDArray[np.uint8]:
     """(N_AZIMUTHS, n_bins) uint8 scan of `targets` ((N, 3), world) with row i seen from
-    `row_poses[i]` (world) along the MulRan azimuth of row i (clockwise sweep); bin k is centred
-    at (k + 0.5) * bin_m [m] (the range spread is RANGE_SIGMA_BINS * BIN_M at any bin size)."""
-    azimuths = column_azimuths_rad(N_AZIMUTHS)
+    `row_poses[i]` (world) along azimuth i (default: MulRan's, a clockwise sweep); bin k is
+    centred at (k + 0.5) * bin_m [m] (the range spread is RANGE_SIGMA_BINS * BIN_M at any bin
+    size)."""
+    azimuths = column_azimuths_rad(N_AZIMUTHS) if azimuths is None else azimuths
     c, s = np.cos(row_poses[:, 2:3]), np.sin(row_poses[:, 2:3])
     dx = targets[None, :, 0] - row_poses[:, 0:1]
     dy = targets[None, :, 1] - row_poses[:, 1:2]

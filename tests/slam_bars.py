@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 MAX_ATE_RATIO = 0.4
-"""SLAM / odometry ATE on synthetic/tiny_loop, unless SLAM is within MAX_SLAM_ATE_M (the issue's
-"<= 0.3 x odometry or <= 1 m", scaled to a drive this short)."""
+"""SLAM / odometry ATE on synthetic/tiny_loop, unless SLAM is within MAX_SLAM_ATE_M (the SLAM
+bar "<= 0.3 x odometry or <= 1 m", scaled to a drive this short)."""
 MAX_SLAM_ATE_M = 0.085
 """Absolute SLAM ATE bar [m] on synthetic/tiny_loop: its odometry alone is at 0.133 m, so a graph
 whose loops did little stays above it."""

@@ -88,7 +88,7 @@ CONFIG_CASES = [
     ("graph: {prior_sigmas: [1, 0, 1]}", "graph.prior_sigmas"),
     ("graph: {gnc_inlier_probability: 1.0}", "graph.gnc_inlier_probability"),
     ("graph: {isam2_iterations: 0}", "graph.isam2_iterations"),
-    # already handled before issue 12: unknown keys, wrong types, bad YAML
+    # the strict reader's own checks: unknown keys, wrong types, bad YAML
     ("odometry: {keyframe: {max_distanc: 3}}", "odometry.keyframe: unknown key 'max_distanc'"),
     ("odometry: {keyframe: {max_frames: many}}", "odometry.keyframe.max_frames"),
     ("odometry: {keyframe: {max_frames: 2.5}}", "odometry.keyframe.max_frames"),

@@ -76,7 +76,7 @@ def test_not_found_message(root: Path) -> None:
         open_sequence("mulran/DCC01", data_root=root)
     message = str(info.value)
     assert str(root / "MulRan" / "DCC01") in message  # the resolved family folder
-    assert str(Path("mulran/DCC01").absolute()) in message  # and the plain path
+    assert "radar-slam list" in message
     assert "sensor_data/radar/polar/<t_ns>.png" in message and MULRAN_URL in message
     assert OXFORD_URL not in message  # only the family asked for
 

@@ -46,7 +46,7 @@ CALIBRATED = {
         }
     },
 }
-"""The settings that calibrate both factor types alike at 4 Hz (docs/odometry_notes.md,
+"""The settings that calibrate both factor types alike at 4 Hz (docs/decisions.md,
 covariance notes and "The graph takes the revised odometry"); not the defaults, which keep both
 conservative at 4 Hz (on `tiny_loop` mean NEES 0.33 for the revised odometry factors, 0.50 for
 the loops, below `NEES_RANGE`)."""

@@ -384,7 +384,7 @@ def test_cauchy_width_one_loses_true_loops_under_strong_drift() -> None:
 
 @pytest.mark.parametrize("drift", ["moderate", "strong"])
 def test_thirty_percent_false_loops(drift: str) -> None:
-    """The robustness bar of issue 6: 30 % false candidates raise the ATE by <= 10 %."""
+    """The robustness bar: 30 % false candidates raise the ATE by <= 10 %."""
     _, _, true_loops, _, false_loops = _scenario(drift)
     assert len(false_loops) / (len(false_loops) + len(true_loops)) >= FALSE_LOOP_FRACTION
     _, clean, _ = _run("cauchy", "gnc", "true", drift)

@@ -1,10 +1,10 @@
 """Loop verification on real radar: Oxford scans 8-12.5 m apart are verified as loops.
 
 The seven real Oxford scans are one straight drive; a scan and one 8-12.5 m further on are what
-a revisit at a low frame rate or in another lane offers the verifier. Until stop 17 the pairs
-over 8 m were rejected: the scans' radial streaks, which stay with the sensor, pulled the
-sinogram shifts of the angles along the road to zero (inlier fraction 0.31 at 12.5 m; the
-simulator's streets keep it above 0.85 at these distances).
+a revisit at a low frame rate or in another lane offers the verifier. Without the relative
+pose's radial-streak removal the pairs over 8 m are rejected: the scans' radial streaks, which
+stay with the sensor, pull the sinogram shifts of the angles along the road to zero (the
+inlier fraction falls far lower than on the simulator's streets at these distances).
 """
 
 from __future__ import annotations

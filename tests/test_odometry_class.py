@@ -18,7 +18,7 @@ pytestmark = pytest.mark.realdata
 
 MAX_PAIR_ERROR_M = 0.15
 MAX_PAIR_ERROR_DEG = 0.3
-MAX_END_ERROR_M = 0.4  # after 12.5 m, mostly GT's lateral offset (see the report on issue 5)
+MAX_END_ERROR_M = 0.4  # after 12.5 m, mostly the GT's lateral offset (README, Limits)
 
 
 @pytest.fixture(scope="module")

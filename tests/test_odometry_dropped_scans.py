@@ -1,5 +1,5 @@
-"""Dropped scans (issue 10's recovery): a real recording loses scans now and then. With a second
-of scans missing in the middle of each of `tiny_junction_turns`' five junction turns, the next
+"""Dropped scans: a real recording loses scans now and then. With a second of scans
+missing in the middle of each of `tiny_junction_turns`' five junction turns, the next
 scan lands up to 44 deg and 7.5 m from the last one (9 deg and 3.4 m with every scan), off the
 constant-velocity prediction; the odometry registers it (no gap) and drifts no more than over
 the whole sequence."""

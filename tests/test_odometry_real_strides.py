@@ -22,7 +22,7 @@ from raplace import se2
 
 MAX_RADIATE_END_FRACTION = 0.01
 """End pose of the strided run against the 4 Hz run, fog frames (about 40 m): translation at
-most this fraction of the distance (0.11, 0.05, 0.24 m at strides 2, 3, 4 at stop 20) ..."""
+most this fraction of the distance ..."""
 MAX_RADIATE_END_DEG = 0.1
 """... and rotation at most this [deg] (at most 0.03)."""
 MAX_OXFORD_END_M = 0.3

@@ -1,4 +1,4 @@
-"""Odometry that never loses its way (issue 10): large motions, the prediction as a hint, recovery.
+"""Odometry that never loses its way: large motions, the prediction as a hint, recovery.
 
 Scans are rendered by the simulator in the `tiny` town (1024 bins, 61 m) from poses of our
 choosing, with motion distortion, so every answer is known: single pairs with motions up to 15 m
@@ -46,7 +46,7 @@ MAX_GAP_RUN = 2
 MAX_DRIVE_ERROR_FRACTION = 0.02
 """End-point error of the short drives below, as a fraction of the distance driven."""
 MAX_DRIFT_PCT_1HZ = 2.5
-"""KITTI drift bar at --stride 4 (issue 10)."""
+"""KITTI drift bar at --stride 4 (1 Hz)."""
 CALIBRATED = OdometryConfig(
     quality=QualityConfig(
         sigma_yaw_deg_per_deg=0.1, deskew_error_fraction=1.25, deskew_yaw_error_fraction=1.25
@@ -64,8 +64,8 @@ NEES_RANGE_1HZ = (1.0, 8.0)
 """The same at 1 Hz (measured up to 6.6 on tiny_junction_turns; 13-48 before)."""
 MAX_REVERSAL_DRIFT_PCT = 1.8
 MAX_REVERSAL_DRIFT_DEG = 1.25
-"""KITTI drift [%, deg/100 m] on tiny_roundabouts at 4 Hz (0.29 and 0.19 at stop 14; 1.65 and 1.14
-when the bar was set; 1.98 and 1.34 while every scan was de-skewed with the yaw-rate trend)."""
+"""KITTI drift [%, deg/100 m] on tiny_roundabouts at 4 Hz (higher while every scan was de-skewed
+with the yaw-rate trend)."""
 
 
 @pytest.fixture(scope="module")
@@ -273,7 +273,7 @@ def driven(
     "scenario", ["tiny_turn_around", "tiny_three_point_turn", "tiny_junction_turns"]
 )
 def test_hard_driving_at_one_hertz(synthetic_root: Path, scenario: str) -> None:
-    """The issue-10 manoeuvres (reduced bins) at --stride 4 (1 Hz): turn-arounds, reverse gear
+    """The driving manoeuvres (reduced bins) at --stride 4 (1 Hz): turn-arounds, reverse gear
     at full lock, curvature steps; no run of more than 2 gaps, the drift of the reported
     (revised) poses within the 1 Hz bar, and the covariances of the prompt results consistent."""
     reported, _, drift = driven(synthetic_root, scenario, stride=4)

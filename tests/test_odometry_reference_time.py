@@ -1,4 +1,4 @@
-"""A scan's pose at its reference time, revised once the next scan has registered (issue 10).
+"""A scan's pose at its reference time, revised once the next scan has registered.
 
 The pose at the end of the sweep is the mid-sweep image pose moved by the velocity; at a yaw-rate
 reversal late in the sweep the velocity measured up to the scan is wrong by tens of degrees per

@@ -23,7 +23,7 @@ MAX_KNOWN_ERROR_DEG = 0.1
 MAX_GT_ERROR_M = 0.15
 MAX_GT_ERROR_DEG = 0.3
 MAX_STRIDE_STEP_ERROR_M = 0.05
-"""Allowed growth of the translation error per extra stride step (issue 10)."""
+"""Allowed growth of the translation error per extra stride step."""
 SWEEP_NS = 250_000_000
 
 

@@ -1,11 +1,11 @@
-"""Known rotations recovered without bias (issue 10): exactly rendered point-target scans.
+"""Known rotations recovered without bias: exactly rendered point-target scans.
 
 The Fourier-Mellin rotation locks toward zero for rotations below about a degree (it finds a
 few per cent of them), so the coarse translation was made at a yaw off by nearly the whole
 rotation; its error leaked into the rotation refinement as a yaw error of about -3.7 % of the
 rotation at a 10 m baseline (-34 mdeg mean for 0.9 deg, up to -73). With the translation
 re-estimated at the refined yaw and the rotation refined again (`RotationConfig.refine_passes`
-2, the default since stop 14; docs/odometry_notes.md) the error no longer follows the rotation.
+2, the default; docs/decisions.md) the error no longer follows the rotation.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from raplace import se2
 from raplace.units import NS_PER_S
 
 SCAN_PERIOD_S = 0.25
-MAX_ERROR_M = 0.05  # the bars of issue 5
+MAX_ERROR_M = 0.05  # known-motion bar
 MAX_ERROR_DEG = 0.1
 SCENE_TIMES_S = (4.0, 9.5, 14.0)
 """Where along the `tiny` route the known-answer pairs start [s]."""
@@ -42,13 +42,12 @@ KNOWN_MOTIONS = (
 DRIFT_FRAMES = 120  # ~270 m of `loop`
 MAX_DRIFT_PCT = 1.0
 MAX_DRIFT_DEG_PER_100M = 1.0
-"""KITTI drift bars [%, deg/100 m]: 0.22 and 0.22 at stop 14 (0.37 and 0.37 earlier); without
-de-skew 1.8 and 1.8, without rotation refinement 3.0 and 4.6."""
+"""KITTI drift bars [%, deg/100 m]; without de-skew or without the rotation refinement the
+drift is several times higher."""
 NEES_RANGE = (0.5, 6.0)
 """Mean normalised squared error of the scan-to-reference motions (3 when calibrated; 25-35
-with the covariances of a de-skew that is off or referred to the end of the sweep). Measured
-here 0.97 since the rotation is refined twice (stop 14; the peak covariances are kept
-conservative, `QualityConfig.sigma_scale` 3) and 2.7 when it was first calibrated."""
+with the covariances of a de-skew that is off or referred to the end of the sweep). The peak
+covariances are kept conservative (`QualityConfig.sigma_scale`)."""
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""A scan the motion model cannot describe stays a local error (issue 10, `odometry.recovery`).
+"""A scan the motion model cannot describe stays a local error (`odometry.recovery`).
 
 On `long_city` the simulator turns each reversal of the route (a street driven there and back)
 into two heading snaps of 90 deg, each within one 0.25 s sweep, 0.75 s apart. Such a sweep is
@@ -29,7 +29,7 @@ PERIOD_S = 0.25
 SNAP_RADPS = 2.0 * np.pi
 """A quarter turn within one sweep (the simulator's reversal)."""
 MAX_HEADING_ERROR_DEG = 1.0
-"""One hard scan must not become a 1-degree heading error (issue 10)."""
+"""One hard scan must not become a 1-degree heading error."""
 MAX_POSITION_ERROR_M = 0.5
 MAX_GAP_RUN = 2
 STRAIGHT_S = 2.0

@@ -191,7 +191,7 @@ def test_coarse_descriptor_shape_and_normalisation(world: np.ndarray) -> None:
 
 
 def test_descriptor_rejects_frequencies_above_nyquist() -> None:
-    with pytest.raises(ValueError, match="max_freq_cpm"):  # the config itself (issue 12)
+    with pytest.raises(ValueError, match="max_freq_cpm"):  # the config itself
         dataclasses.replace(CFG, max_freq_cpm=0.6)
     nyquist_cell_m = 0.5 / CFG.max_freq_cpm
     with pytest.raises(RaPlaceError):  # an image coarser than the config's

@@ -1,4 +1,4 @@
-"""Driving that shows what gentle driving hides (issue 10): legs of constant curvature, reverse
+"""Driving that shows what gentle driving hides: legs of constant curvature, reverse
 gear, stops, and the scenarios built from them (turn-around, U-turn, three-point turn,
 roundabout, stop-and-go, stepped junction turns, reversing, held-out drives). Route properties
 are measured on the simulated base poses; generation is checked on a few reduced-bin scans."""

@@ -1,5 +1,5 @@
 """Route reversals are driven as a car drives them, and every scenario stays within a car's
-envelope (issue 10: the smooth drive folded a street driven there and back into a quarter turn
+envelope (a smooth drive would fold a street driven there and back into a quarter turn
 within one radar sweep). Checked on the drives' base poses only (no rendering)."""
 
 from __future__ import annotations

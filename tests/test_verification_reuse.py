@@ -1,4 +1,4 @@
-"""Loop verification reusing the odometry's conditioned scans (issue 15): the same decisions
+"""Loop verification reusing the odometry's conditioned scans: the same decisions
 and measurements as conditioning the query again, at most `OFFERS_KEPT` handed-over scans kept
 (the detector verifies a scan once the next one is in)."""
 

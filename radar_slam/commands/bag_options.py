@@ -23,8 +23,12 @@ GT_TOPIC_OPTION = typer.Option(
 LAYOUT_OPTION = typer.Option(
     None,
     "--layout",
-    help=f"ROS bag: image layout preset ({', '.join(LAYOUT_PRESETS)}); finer keys (rows, "
-    "azimuth_direction, range_resolution_m) go in the dataset: section of --config.",
+    help=f"ROS bag: image layout preset ({', '.join(LAYOUT_PRESETS)}): radar-slam is what "
+    "`radar-slam export` writes (recognised without this option); navtech, the default otherwise, "
+    "the Navtech ROS driver's radar_data/b_scan_image (rows are azimuths, clockwise from forward; "
+    "0.0438 m bins); mulran the MulRan player's /Navtech/Polar (rows are range bins, 0.05952 m). "
+    "Finer keys (rows, azimuth_direction, range_resolution_m) go in the dataset: section of "
+    "--config.",
 )
 
 

@@ -134,7 +134,7 @@ def describe_sequence(sequence: RadarSequence, spec: str) -> list[str]:
         lines.append("ground truth:      none")
     else:
         missing = int(np.isnan(ground_truth[:, 0]).sum())
-        note = f", {missing} poses NaN (outside GT)" if missing else ""
+        note = f", {missing} poses NaN (outside the GT or in its outages)" if missing else ""
         lines.append(
             f"ground truth:      {len(ground_truth)} poses, trajectory length "
             f"{trajectory_length_m(ground_truth):.2f} m{note}"

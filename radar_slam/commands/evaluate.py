@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from enum import Enum
 from pathlib import Path
 
@@ -16,6 +17,11 @@ from radar_slam.evaluation.metrics import (
     TrajectoryMetrics,
     evaluate,
 )
+from radar_slam.evaluation.time_offset import (
+    TimeOffset,
+    estimate_time_offset,
+    ground_truth_with_offset,
+)
 from radar_slam.outputs import json_text
 from radar_slam.results import check_output_file, write_text_atomically
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
@@ -27,6 +33,7 @@ TABLE_COLUMNS = (
     ("ATE [m]", "ate_rmse_m", "{:.3f}"),
     ("ATE origin [m]", "ate_origin_rmse_m", "{:.3f}"),
     ("RPE [m]", "rpe_trans_rmse_m", "{:.4f}"),
+    ("end [%]", "end_point_error_pct", "{:.2f}"),
     ("drift [%]", "drift_trans_pct", "{:.2f}"),
     ("drift [deg/100m]", "drift_rot_deg_per_100m", "{:.3f}"),
 )
@@ -79,6 +86,8 @@ def metrics_json(results: dict[str, TrajectoryMetrics]) -> dict[str, object]:
 
 MAX_DIFF_MS = 1e9
 """Upper bound of --max-diff-ms (rejects inf, which has no nanosecond count)."""
+MAX_GT_ACCURACY_M = 1e3
+"""Upper bound of --gt-accuracy (rejects inf)."""
 
 
 def eval_command(
@@ -108,11 +117,33 @@ def eval_command(
         max=MAX_DIFF_MS,
         help="TUM association tolerance between timestamps, in milliseconds.",
     ),
+    estimate_offset: bool = typer.Option(
+        False,
+        "--estimate-offset",
+        help="Estimate the GT's clock offset from the first estimate's speed profile, print "
+        "it with its uncertainty, and add rows scored with it applied (TUM files only).",
+    ),
+    gt_offset_s: float | None = typer.Option(
+        None,
+        "--gt-offset",
+        help="A known GT clock offset [s] (GT minus estimate): add rows scored with it applied.",
+    ),
+    gt_accuracy_m: float = typer.Option(
+        0.0,
+        "--gt-accuracy",
+        min=0.0,
+        max=MAX_GT_ACCURACY_M,
+        help="Position accuracy of the GT [m]: drift then uses only segments long enough for "
+        "it (2 for GNSS without RTK: 400-800 m).",
+    ),
 ) -> None:
-    """Compare trajectories with ground truth: ATE (aligned and first-pose), RPE, KITTI drift.
+    """Compare trajectories with ground truth: ATE (aligned and first-pose), RPE, end-point
+    error, KITTI drift.
 
     Arguments: EST [EST ...] GT, the ground truth last. TUM files are associated by timestamp,
-    KITTI files by index (equal pose counts needed).
+    KITTI files by index (equal pose counts needed). A GT on another clock (GNSS) can be read
+    through a clock offset, estimated (--estimate-offset) or given (--gt-offset); both sets of
+    rows are shown, labelled.
     """
     if len(trajectories) < 2:
         raise typer.BadParameter(
@@ -125,35 +156,87 @@ def eval_command(
         detect_format(p) if fmt == TrajectoryFormat.auto else fmt.value for p in trajectories
     ]
     association: Association = "index" if "kitti" in formats else "timestamp"
+    if association == "index" and (estimate_offset or gt_offset_s is not None):
+        raise typer.BadParameter(
+            "a clock offset needs timestamps: give TUM files", param_hint="--estimate-offset"
+        )
     gt = read_trajectory(gt_path, formats[-1])
+    estimates = {
+        name: read_trajectory(path, path_fmt)
+        for name, path, path_fmt in zip(
+            trajectory_names(est_paths), est_paths, formats[:-1], strict=True
+        )
+    }
+    offset = _clock_offset(next(iter(estimates.values())), gt, estimate_offset, gt_offset_s)
     results: dict[str, TrajectoryMetrics] = {}
-    for name, path, path_fmt in zip(
-        trajectory_names(est_paths), est_paths, formats[:-1], strict=True
-    ):
-        est: Trajectory = read_trajectory(path, path_fmt)
-        try:
-            results[name] = evaluate(
-                est,
-                gt,
-                by=association,
-                max_diff_ns=round(max_diff_ms * NS_PER_MS),
-                rpe_delta=rpe_delta,
-            )
-        except TrajectoryError as exc:  # name the files (issue 12)
-            raise TrajectoryError(f"{path} against {gt_path}: {exc}") from None
+    for (name, est), path in zip(estimates.items(), est_paths, strict=True):
+        references = {name: gt}
+        if offset is not None:
+            shifted = ground_truth_with_offset(gt, est.timestamps_ns, offset.offset_s)
+            references[f"{name} (GT offset {offset.offset_s:+.3f} s)"] = shifted
+        for row, reference in references.items():
+            try:
+                results[row] = evaluate(
+                    est,
+                    reference,
+                    by=association,
+                    max_diff_ns=round(max_diff_ms * NS_PER_MS),
+                    rpe_delta=rpe_delta,
+                    gt_accuracy_m=gt_accuracy_m,
+                )
+            except TrajectoryError as exc:  # name the files
+                raise TrajectoryError(f"{path} against {gt_path}: {exc}") from None
     typer.echo(
         f"ground truth: {gt_path} ({len(gt)} poses, {gt.length_m():.1f} m); "
         f"association by {association}; RPE over {rpe_delta} frame(s)"
     )
+    if offset is not None:
+        typer.echo(_offset_line(offset, estimate_offset))
     typer.echo(format_table(results))
+    shortest = next(iter(results.values())).drift_min_segment_m
+    typer.echo(
+        f"drift over KITTI segments of {shortest:.0f}-{max(KITTI_SEGMENT_LENGTHS_M):.0f} m"
+        + ("" if gt_accuracy_m == 0 else f" (GT accuracy {gt_accuracy_m:g} m)")
+    )
     if any(m.drift_trans_pct is None for m in results.values()):
         typer.echo(
-            "note: drift needs a ground-truth path of at least "
-            f"{min(KITTI_SEGMENT_LENGTHS_M):.0f} m between matched poses; shown as n/a"
+            f"note: drift needs a ground-truth path of at least {shortest:.0f} m between "
+            "matched poses; shown as n/a"
         )
     if json_path is not None:
         write_text_atomically(json_path, json_text(metrics_json(results)))
         typer.echo(f"wrote {json_path}")
+
+
+def _clock_offset(
+    estimate: Trajectory, gt: Trajectory, estimate_offset: bool, given_s: float | None
+) -> TimeOffset | None:
+    """The offset to read the GT through: estimated, given, or None."""
+    if given_s is not None:
+        if not math.isfinite(given_s):
+            raise typer.BadParameter(f"must be finite, got {given_s}", param_hint="--gt-offset")
+        return TimeOffset(given_s, 0.0, float("nan"), 0.0, (float("nan"), float("nan")))
+    if not estimate_offset:
+        return None
+    offset = estimate_time_offset(estimate, gt)
+    if offset is None:
+        raise TrajectoryError(
+            "cannot estimate the GT clock offset: the trajectories share less than "
+            "20 s of driving, or the speed barely varies"
+        )
+    return offset
+
+
+def _offset_line(offset: TimeOffset, estimated: bool) -> str:
+    """One line saying which clock offset the labelled rows use."""
+    if not estimated:
+        return f"GT clock offset {offset.offset_s:+.3f} s (given; GT minus estimate)"
+    first, second = offset.halves_s
+    return (
+        f"GT clock offset {offset.offset_s:+.3f} +- {offset.sigma_s:.3f} s (GT minus estimate, "
+        f"from the speed profiles; correlation {offset.correlation:.3f}; halves of the drive "
+        f"{first:+.3f} and {second:+.3f} s)"
+    )
 
 
 def register(app: typer.Typer) -> None:

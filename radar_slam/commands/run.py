@@ -26,10 +26,10 @@ from radar_slam.commands.options import (
     progress_bar,
 )
 from radar_slam.datasets.stride import strided
-from radar_slam.maps.build import build_map  # issue-13: every run writes map/
-from radar_slam.maps.format import Map, write_map  # issue-13
-from radar_slam.maps.session import join_session  # issue-13: run --map
-from radar_slam.maps.writers import write_joined  # issue-13
+from radar_slam.maps.build import build_map  # every run writes map/
+from radar_slam.maps.format import Map, write_map
+from radar_slam.maps.session import join_session  # run --map
+from radar_slam.maps.writers import write_joined
 from radar_slam.outputs import (
     odometry_summary,
     slam_summary,
@@ -47,7 +47,7 @@ from radar_slam.results import check_output_root, check_result_location, write_r
 from radar_slam.viewer import SPAWN, RerunViewer, check_viewer_target, import_rerun
 
 MAP_FOLDER = "map"
-"""The map every SLAM run writes into its result folder (`radar_slam.maps`, issue-13)."""
+"""The map every SLAM run writes into its result folder (`radar_slam.maps`)."""
 SEQUENCE_ARGUMENT = typer.Argument(
     ...,
     help="Sequence: family/name (mulran/KAIST01, oxford/..., boreas/..., radiate/..., "
@@ -56,16 +56,16 @@ SEQUENCE_ARGUMENT = typer.Argument(
 MAP_OPTION = typer.Option(
     None,
     "--map",
-    help="Extend this map (a run's map/): multi-session SLAM in the map's frame (issue-13).",
+    help="Extend this map (a run's map/): multi-session SLAM in the map's frame.",
     file_okay=False,
 )
-VIEWER_OPTION = typer.Option(  # issue-14
+VIEWER_OPTION = typer.Option(  # live viewer
     None,
     "--viewer",
     help="Stream the run to Rerun: --viewer spawns the viewer, --viewer FILE.rrd saves a "
     "recording (needs the viewer extra: pip install 'radar-slam\\[viewer]').",
 )
-STRIDE_OPTION = typer.Option(  # issue 10: strided view of the sequence
+STRIDE_OPTION = typer.Option(  # strided view of the sequence
     1, "--stride", min=1, help="Use every K-th scan (4 Hz data at --stride 4 is 1 Hz)."
 )
 
@@ -86,18 +86,18 @@ def run_command(
         False, "--no-loops", help="Odometry and pose graph only, no loop closing."
     ),
     data_root: Path | None = DATA_ROOT_OPTION,
-    topic: str | None = TOPIC_OPTION,  # issue-14: ROS bag input and live viewer
+    topic: str | None = TOPIC_OPTION,  # ROS bag input and live viewer
     gt_topic: str | None = GT_TOPIC_OPTION,
     layout: str | None = LAYOUT_OPTION,
     viewer: str | None = VIEWER_OPTION,
-    map_path: Path | None = MAP_OPTION,  # issue-13
+    map_path: Path | None = MAP_OPTION,
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
     check_output_root(out)
     if viewer is not None:  # fail before any work: rerun-sdk missing, no display, bad file
         import_rerun()
         check_viewer_target(viewer)
-    prior_map = None if map_path is None else Map.load(map_path)  # issue-13
+    prior_map = None if map_path is None else Map.load(map_path)
     bag_options = bag_overrides(topic, gt_topic, layout)
     seq, settings = open_configured(sequence, data_root, config, bag_options)
     seq = strided(seq, stride)
@@ -115,20 +115,20 @@ def run_command(
         if observer is not None:
             observer.abandon()
         raise
-    joined = None if prior_map is None else join_session(results, seq, prior_map)  # issue-13
-    results = results if joined is None else joined.results  # issue-13: in the map's frame
+    joined = None if prior_map is None else join_session(results, seq, prior_map)
+    results = results if joined is None else joined.results  # in the map's frame
     joined_text: list[str] = []
 
     def write(folder: Path) -> None:
         write_results(folder, results)
-        the_map = build_map(results, seq) if joined is None else joined.map  # issue-13
+        the_map = build_map(results, seq) if joined is None else joined.map
         write_map(folder / MAP_FOLDER, the_map)
         if joined is not None:
             joined_text.append(write_joined(folder, joined))
 
     folder = write_result_dir(seq.family, seq.name, write, out)
     typer.echo(slam_summary(results), nl=False)
-    typer.echo("".join(joined_text), nl=False)  # issue-13: run --map
+    typer.echo("".join(joined_text), nl=False)  # run --map
     typer.echo(f"results in {folder}")
     if viewer is not None and viewer != SPAWN:
         typer.echo(f"viewer recording in {viewer}")
@@ -141,7 +141,7 @@ def odometry_command(
     max_frames: int | None = MAX_FRAMES_OPTION,
     stride: int = STRIDE_OPTION,
     data_root: Path | None = DATA_ROOT_OPTION,
-    topic: str | None = TOPIC_OPTION,  # issue-14: ROS bag input
+    topic: str | None = TOPIC_OPTION,  # ROS bag input
     gt_topic: str | None = GT_TOPIC_OPTION,
     layout: str | None = LAYOUT_OPTION,
 ) -> None:

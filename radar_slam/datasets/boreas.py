@@ -47,11 +47,13 @@ from radar_slam.datasets._io import (
     read_gray_png,
     read_numeric_table,
 )
-from radar_slam.datasets.frame import RadarFrame
-from radar_slam.datasets.mulran import interpolate_poses
+from radar_slam.datasets.frame import GroundTruthSource, RadarFrame
+from radar_slam.datasets.mulran import gt_max_gap_ns, interpolate_poses
 from radar_slam.datasets.navtech import OXFORD_HEADER_BYTES
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
+from raplace import checks
+from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
@@ -144,7 +146,9 @@ class BoreasSequence:
         folder: Path,
         range_resolution_m: float | None = None,
         azimuth_offset_rad: float = 0.0,
+        gt_time_offset_s: float = 0.0,
     ) -> None:
+        checks.finite("gt_time_offset_s", gt_time_offset_s)
         folder = Path(folder)
         radar = folder / RADAR_FOLDER
         if not radar.is_dir():
@@ -164,6 +168,7 @@ class BoreasSequence:
         self.name: str = folder.name
         self.folder = folder
         self.azimuth_offset_rad = float(azimuth_offset_rad)
+        self.gt_time_offset_ns = int(round(gt_time_offset_s * NS_PER_S))
         self.range_resolution_m = float(range_resolution_m)
         self._paths = paths
         self._times_ns = scan_us * NS_PER_US
@@ -217,7 +222,12 @@ class BoreasSequence:
         if self.gt_path is None:
             return None
         times, poses = read_radar_poses(self.gt_path)
-        result = interpolate_poses(times, poses, self._times_ns)
+        result = interpolate_poses(
+            times,
+            poses,
+            self._times_ns + self.gt_time_offset_ns,
+            max_gap_ns=gt_max_gap_ns(times),
+        )
         missing = int(np.isnan(result[:, 0]).sum())
         if missing:
             logger.warning(
@@ -228,6 +238,13 @@ class BoreasSequence:
                 len(self),
             )
         return result
+
+    @property
+    def ground_truth_source(self) -> GroundTruthSource | None:
+        """Boreas radar_poses.csv: post-processed GNSS/INS with RTK (centimetre level)."""
+        if self.gt_path is None:
+            return None
+        return GroundTruthSource(f"Boreas post-processed RTK GNSS/INS ({self.gt_path})", 0.05)
 
     def __repr__(self) -> str:
         return f"BoreasSequence({str(self.folder)!r}, frames={len(self)})"

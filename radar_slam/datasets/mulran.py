@@ -43,7 +43,7 @@ from radar_slam.datasets._io import (
     read_numeric_table,
     transposed,
 )
-from radar_slam.datasets.frame import RadarFrame
+from radar_slam.datasets.frame import GroundTruthSource, RadarFrame
 from radar_slam.datasets.navtech import (
     MULRAN_ENCODER_STEP,
     MULRAN_FIRST_ENCODER,
@@ -56,6 +56,7 @@ from radar_slam.datasets.navtech import (
     encoder_to_azimuth_ccw,
 )
 from radar_slam.datasets.registry import Family, register
+from radar_slam.datasets.sweep import SweepTimes
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
 from raplace import checks, se2
 from raplace.units import NS_PER_S
@@ -80,10 +81,9 @@ GLOBAL_POSE_COLUMNS = 13
 GP_COL_R00, GP_COL_X, GP_COL_R10, GP_COL_Y = 1, 4, 5, 8
 STAMP_FILES = ("sensor_data/navtech_top_stamp.csv", "navtech_top_stamp.csv")
 
-NOMINAL_SCAN_PERIOD_NS = int(round(NS_PER_S / SCAN_RATE_HZ))
-"""One revolution at 4 Hz [ns] (the CIR204-H): the scan period used when stamps cannot tell it."""
-SCAN_PERIOD_TOLERANCE = 0.2
-"""A gap between radar stamps counts as one scan period if within +-20 % of the nominal one."""
+MULRAN_GT_DESCRIPTION = "MulRan global_pose.csv: GPS/INS and fibre-optic gyro fused by SLAM"
+MULRAN_GT_ACCURACY_M = 0.1
+"""Stated accuracy of MulRan's fused GT positions [m] (decimetre level)."""
 GT_CLAMP_NS = 500_000_000
 """Upper bound of the GT tolerance (one GT sample period, at most this)."""
 OUTAGE_PERIODS = 2
@@ -133,44 +133,6 @@ def column_azimuths_rad(n_azimuths: int = MULRAN_N_AZIMUTHS) -> NDArray[np.float
     return encoder_to_azimuth_ccw(encoders)
 
 
-def scan_periods_ns(
-    scan_stamps_ns: NDArray[np.int64],
-    radar_stamps_ns: NDArray[np.int64],
-    nominal_period_ns: int = NOMINAL_SCAN_PERIOD_NS,
-) -> NDArray[np.int64]:
-    """Duration of the sweep ending at each scan stamp [ns].
-
-    Args:
-        scan_stamps_ns: (N,) end-of-sweep times of the scans.
-        radar_stamps_ns: (M,) sorted end-of-sweep times of every sweep the radar recorded
-            (navtech_top_stamp.csv, or the scan stamps themselves).
-        nominal_period_ns: one revolution of the radar [ns] (250 ms at 4 Hz).
-
-    Returns:
-        (N,) int64: the gap to the previous radar stamp when it is within the tolerance of one
-        revolution, otherwise the nominal period (first scan, dropped or skipped sweeps: stamps
-        alone cannot tell a slower radar from sweeps left out).
-    """
-    previous_index = np.searchsorted(radar_stamps_ns, scan_stamps_ns, side="left") - 1
-    has_previous = previous_index >= 0
-    gaps = np.where(
-        has_previous,
-        scan_stamps_ns - radar_stamps_ns[np.maximum(previous_index, 0)],
-        nominal_period_ns,
-    )
-    plausible = np.abs(gaps - nominal_period_ns) <= SCAN_PERIOD_TOLERANCE * nominal_period_ns
-    return np.where(plausible, gaps, nominal_period_ns).astype(np.int64)
-
-
-def uniform_azimuth_times_ns(end_ns: int, period_ns: int, n_azimuths: int) -> NDArray[np.int64]:
-    """Azimuth times spread uniformly over one period, the last one at `end_ns`.
-
-    Azimuth j is at end - (n - 1 - j) * period / n, so consecutive sweeps tile time evenly.
-    """
-    steps_back = np.arange(n_azimuths - 1, -1, -1, dtype=np.float64)
-    return end_ns - np.round(steps_back * (period_ns / n_azimuths)).astype(np.int64)
-
-
 def read_global_pose(path: Path) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Read MulRan `global_pose.csv`.
 
@@ -195,26 +157,28 @@ def interpolate_poses(
     poses: NDArray[np.float64],
     query_ns: NDArray[np.int64],
     clamp_ns: int | None = None,
+    max_gap_ns: int | None = None,
 ) -> NDArray[np.float64]:
     """Interpolate SE(2) poses to query times; NaN rows where the poses do not tell.
 
     x and y are linear in time; yaw is linear after unwrapping (so it turns the short way through
     +-pi). A query outside [times[0], times[-1]] has no pose (its row is NaN): the end pose is
-    never held and nothing is extrapolated. Inside the span, a query between two samples more
-    than `OUTAGE_PERIODS` x `clamp_ns` apart lies in an outage of the poses and has none either.
+    never held and nothing is extrapolated. With `max_gap_ns`, a query between two samples more
+    than that apart lies in an outage of the poses and has none either.
 
     Args:
         times_ns: (N,) strictly increasing pose times [ns].
         poses: (N, 3) poses (x, y, yaw).
         query_ns: (M,) times to interpolate at [ns].
-        clamp_ns: the tolerance [ns], one sample period: by default the median gap of
-            `times_ns`, at most `GT_CLAMP_NS` (see `gt_tolerance_ns`).
+        clamp_ns: kept for callers of the former end-pose tolerance; outside the span there is
+            never a pose, whatever its value.
+        max_gap_ns: the longest gap between two samples that is interpolated over [ns] (e.g.
+            `gt_max_gap_ns(times_ns)`, the family's tolerance); None interpolates over any gap.
 
     Returns:
         (M, 3) interpolated poses, yaw wrapped to [-pi, pi); NaN rows as above.
     """
-    if clamp_ns is None:
-        clamp_ns = gt_tolerance_ns(times_ns)
+    del clamp_ns  # the end pose is never held
     origin = times_ns[0]
     t = (times_ns - origin).astype(np.float64)
     q = (query_ns - origin).astype(np.float64)
@@ -224,21 +188,23 @@ def interpolate_poses(
         axis=-1,
     )
     result[:, 2] = se2.wrap_angle(result[:, 2])
-    result[~gt_covers(times_ns, query_ns, clamp_ns)] = np.nan
+    result[~gt_covers(times_ns, query_ns, max_gap_ns)] = np.nan
     return result
 
 
 def gt_covers(
-    times_ns: NDArray[np.int64], query_ns: NDArray[np.int64], tolerance_ns: int
+    times_ns: NDArray[np.int64], query_ns: NDArray[np.int64], max_gap_ns: int | None = None
 ) -> NDArray[np.bool_]:
-    """(M,) True where a query can be interpolated: at a sample time, or between two samples at
-    most `OUTAGE_PERIODS` tolerances apart (not past either end, not inside an outage)."""
+    """(M,) True where a query can be interpolated: inside the span of `times_ns`, at a sample
+    time or between two samples at most `max_gap_ns` apart (None: any)."""
     query_ns = np.asarray(query_ns, dtype=np.int64)
     inside = (query_ns >= times_ns[0]) & (query_ns <= times_ns[-1])
+    if max_gap_ns is None:
+        return inside
     after = np.clip(np.searchsorted(times_ns, query_ns, side="left"), 0, len(times_ns) - 1)
     before = np.clip(after - 1, 0, len(times_ns) - 1)
     at_sample = times_ns[after] == query_ns
-    short_gap = times_ns[after] - times_ns[before] <= OUTAGE_PERIODS * tolerance_ns
+    short_gap = times_ns[after] - times_ns[before] <= max_gap_ns
     return inside & (at_sample | short_gap)
 
 
@@ -249,11 +215,20 @@ def gt_tolerance_ns(times_ns: NDArray[np.int64]) -> int:
     return int(min(GT_CLAMP_NS, np.median(np.diff(times_ns))))
 
 
+def gt_max_gap_ns(times_ns: NDArray[np.int64]) -> int:
+    """The longest GT gap interpolated over: `OUTAGE_PERIODS` tolerances [ns]; a longer one is
+    an outage (a single dropped sample or jitter is not)."""
+    return OUTAGE_PERIODS * gt_tolerance_ns(times_ns)
+
+
 def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
-    """T_world_radar (N, 3) at each scan time, from `global_pose.csv` (NaN rows outside GT)."""
+    """T_world_radar (N, 3) at each (GT-clock) scan time, from `global_pose.csv` (NaN rows
+    outside GT)."""
     times, base_poses = read_global_pose(gt_path)
     tolerance_ns = gt_tolerance_ns(times)
-    base_at_scans = interpolate_poses(times, base_poses, scan_stamps_ns, tolerance_ns)
+    base_at_scans = interpolate_poses(
+        times, base_poses, scan_stamps_ns, max_gap_ns=gt_max_gap_ns(times)
+    )
     missing = int(np.isnan(base_at_scans[:, 0]).sum())
     if missing:
         logger.warning(
@@ -288,6 +263,8 @@ class MulRanSequence:
         scan_rate_hz: revolutions per second of the radar (the `dataset:` config section; 4 for
             MulRan's CIR204-H). A scan's azimuths are spread over the gap to the previous radar
             stamp when that is within 20 % of one revolution, else over one revolution.
+        gt_time_offset_s: GT clock minus radar clock [s]: a scan stamped t takes the GT pose of
+            time t + offset.
 
     Raises:
         DatasetNotFoundError: `folder` does not exist.
@@ -303,8 +280,10 @@ class MulRanSequence:
         family: str = MULRAN_FAMILY,
         azimuth_offset_rad: float = 0.0,
         scan_rate_hz: float = SCAN_RATE_HZ,
+        gt_time_offset_s: float = 0.0,
     ) -> None:
         checks.positive("scan_rate_hz", scan_rate_hz)
+        checks.finite("gt_time_offset_s", gt_time_offset_s)
         folder = Path(folder)
         if not folder.is_dir():
             raise DatasetNotFoundError(f"MulRan sequence folder {folder} does not exist")
@@ -328,10 +307,9 @@ class MulRanSequence:
         gt_path = folder / GLOBAL_POSE_FILE
         self.gt_path: Path | None = gt_path if gt_path.is_file() else None
         radar_stamps = self._radar_stamps(folder, stamps)
+        self.gt_time_offset_ns = int(round(gt_time_offset_s * NS_PER_S))
         self.scan_rate_hz = float(scan_rate_hz)
-        self._periods_ns = scan_periods_ns(
-            stamps, radar_stamps, int(round(NS_PER_S / self.scan_rate_hz))
-        )
+        self._sweep_times = SweepTimes(stamps, self.scan_rate_hz, radar_stamps)
 
     @staticmethod
     def _radar_stamps(folder: Path, scan_stamps: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -375,9 +353,7 @@ class MulRanSequence:
             image = read_gray_png(path, (self.n_bins, MULRAN_N_AZIMUTHS))
             polar = transposed(image)
             azimuths = column_azimuths_rad(MULRAN_N_AZIMUTHS)
-            azimuth_times = uniform_azimuth_times_ns(
-                stamp, int(self._periods_ns[index]), MULRAN_N_AZIMUTHS
-            )
+            azimuth_times = self._sweep_times(index, MULRAN_N_AZIMUTHS)
         return RadarFrame(
             timestamp_ns=stamp,
             polar=polar,
@@ -401,7 +377,16 @@ class MulRanSequence:
         """
         if self.gt_path is None:
             return None
-        return radar_ground_truth(self.gt_path, self._stamps)
+        return radar_ground_truth(self.gt_path, self._stamps + self.gt_time_offset_ns)
+
+    @property
+    def ground_truth_source(self) -> GroundTruthSource | None:
+        """MulRan's global_pose.csv, or the simulator's exact poses."""
+        if self.gt_path is None:
+            return None
+        if self.family != MULRAN_FAMILY:
+            return GroundTruthSource(f"simulated poses ({self.gt_path})", 0.0)
+        return GroundTruthSource(MULRAN_GT_DESCRIPTION + f" ({self.gt_path})", MULRAN_GT_ACCURACY_M)
 
     def __repr__(self) -> str:
         return f"MulRanSequence({str(self.folder)!r}, frames={len(self)})"
@@ -414,6 +399,6 @@ MULRAN = register(
         detect=is_mulran_sequence,
         layout=MULRAN_LAYOUT,
         obtain=MULRAN_OBTAIN,
-        options=("range_resolution_m", "azimuth_offset_rad", "scan_rate_hz"),
+        options=("range_resolution_m", "azimuth_offset_rad", "scan_rate_hz", "gt_time_offset_s"),
     )
 )

@@ -102,7 +102,8 @@ def open_sequence(
             folder = family_folder(root, family.name) / spec.strip(SPEC_SEPARATOR)
             if folder.is_dir() and family.detect(folder):
                 return _open_with(family, folder, loader_options)
-    raise DatasetNotFoundError(_not_found(str(spec), root, named[0] if named else None))
+    family_named = None if named is None else named[0]
+    raise DatasetNotFoundError(_not_found(str(spec), root, family_named))
 
 
 MAX_SUGGESTIONS = 3
@@ -136,6 +137,9 @@ def _not_found(spec: str, root: Path, family: Family | None) -> str:
     if "/" in spec and family is None:
         known = ", ".join(sorted(families()))
         text = f"sequence {spec!r}: unknown family {spec.split('/')[0]!r} (families: {known})"
+    elif family is not None:
+        folder = sequence_folder(root, family, spec.split("/", 1)[1])
+        text = f"sequence {spec!r} not found: no folder {folder.absolute()}"
     else:
         text = f"sequence {spec!r} not found under the data root {root}"
     if close:

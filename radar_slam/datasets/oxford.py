@@ -38,7 +38,8 @@ from radar_slam.datasets._io import (
     read_gray_png,
     read_numeric_table,
 )
-from radar_slam.datasets.frame import RadarFrame
+from radar_slam.datasets.frame import GroundTruthSource, RadarFrame
+from radar_slam.datasets.mulran import interpolate_poses
 from radar_slam.datasets.navtech import (
     OXFORD_HEADER_BYTES,
     OXFORD_N_AZIMUTHS,
@@ -48,10 +49,13 @@ from radar_slam.datasets.navtech import (
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
-from raplace import se2
-from raplace.units import NS_PER_US, US_PER_S
+from raplace import checks, se2
+from raplace.units import NS_PER_S, NS_PER_US, US_PER_S
 
 logger = logging.getLogger(__name__)
+
+OXFORD_GT_ACCURACY_M = 0.1
+"""Stated accuracy of the chained ground-truth odometry over a partial sequence [m]."""
 
 OXFORD_FAMILY = "oxford"
 OXFORD_SENSOR = "navtech-cts350x"
@@ -208,7 +212,9 @@ class OxfordSequence:
         folder: Path,
         range_resolution_m: float = OXFORD_RANGE_RESOLUTION_M,
         azimuth_offset_rad: float = 0.0,
+        gt_time_offset_s: float = 0.0,
     ) -> None:
+        checks.finite("gt_time_offset_s", gt_time_offset_s)
         folder = Path(folder)
         radar = folder / RADAR_FOLDER
         if not radar.is_dir():
@@ -244,6 +250,7 @@ class OxfordSequence:
         self.folder = folder
         self.range_resolution_m = range_resolution_m
         self.azimuth_offset_rad = float(azimuth_offset_rad)
+        self.gt_time_offset_ns = int(round(gt_time_offset_s * NS_PER_S))
         self._paths = paths
         self._scan_us = scan_us
         gt_path = folder / ODOMETRY_FILE
@@ -291,7 +298,24 @@ class OxfordSequence:
         """(N, 3) radar poses (x, y, yaw) in the frame of the folder's first scan; None w/o GT."""
         if self._odometry is None:
             return None
-        return self._odometry.chain(self._scan_us)
+        chain = self._odometry.chain(self._scan_us)
+        if self.gt_time_offset_ns == 0:
+            return chain
+        # The chain is sampled at the scans themselves: shifted, it is interpolated between them.
+        known = np.isfinite(chain[:, 0])
+        return interpolate_poses(
+            self._times_ns[known], chain[known], self._times_ns + self.gt_time_offset_ns, 0
+        )
+
+    @property
+    def ground_truth_source(self) -> GroundTruthSource | None:
+        """Oxford's ground-truth radar odometry, chained from the folder's first scan."""
+        if self.gt_path is None:
+            return None
+        return GroundTruthSource(
+            f"Oxford ground-truth radar odometry chained from the first scan ({self.gt_path})",
+            OXFORD_GT_ACCURACY_M,
+        )
 
     def __repr__(self) -> str:
         return f"OxfordSequence({str(self.folder)!r}, frames={len(self)})"

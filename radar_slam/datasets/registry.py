@@ -45,11 +45,17 @@ class DatasetConfig:
         scan_rate_hz: revolutions per second of a radar whose files carry no azimuth times
             (MulRan layout), which the azimuth times are spread over; None keeps the loader's
             own (MulRan: 4; synthetic: the simulated sensor's).
+        gt_time_offset_s: ground-truth clock minus radar clock [s]: a scan stamped t takes the
+            GT pose of time t + offset. `radar-slam eval` estimates it. None is 0.
+        lever_arm_m: RADIATE: the radar's (x forward, y left) position relative to the GNSS
+            antenna [m]; None is (0, 0).
     """
 
     range_resolution_m: float | None = None
     azimuth_offset_rad: float | None = None
     scan_rate_hz: float | None = None
+    gt_time_offset_s: float | None = None
+    lever_arm_m: tuple[float, float] | None = None
     # ROS bags only (radar_slam.datasets.rosbag): scan and GT topics, image layout.
     topic: str | None = None
     gt_topic: str | None = None
@@ -64,6 +70,13 @@ class DatasetConfig:
             checks.finite("azimuth_offset_rad", self.azimuth_offset_rad)
         if self.scan_rate_hz is not None:
             checks.positive("scan_rate_hz", self.scan_rate_hz)
+        if self.gt_time_offset_s is not None:
+            checks.finite("gt_time_offset_s", self.gt_time_offset_s)
+        if self.lever_arm_m is not None:
+            if len(self.lever_arm_m) != 2:
+                raise ValueError(f"lever_arm_m must be [x, y] in metres, got {self.lever_arm_m}")
+            for value in self.lever_arm_m:
+                checks.finite("lever_arm_m", value)
 
     def loader_options(self) -> dict[str, Any]:
         """The keyword arguments to pass to a family's `open` (only the values that are set)."""
@@ -96,7 +109,7 @@ class Family:
     obtain: str
     resolve: Callable[[Path, str], Path] | None = None
     detect_priority: int = 0
-    options: tuple[str, ...] = ("range_resolution_m", "azimuth_offset_rad")
+    options: tuple[str, ...] = ("range_resolution_m", "azimuth_offset_rad", "gt_time_offset_s")
 
 
 _FAMILIES: dict[str, Family] = {}

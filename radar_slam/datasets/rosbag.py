@@ -39,19 +39,22 @@ from rosbags.interfaces import Connection
 from rosbags.typesys import Stores, get_typestore
 
 from radar_slam.datasets._io import decode_oxford_form, frame_index
-from radar_slam.datasets.frame import RadarFrame
-from radar_slam.datasets.mulran import interpolate_poses
+from radar_slam.datasets.frame import GroundTruthSource, RadarFrame
+from radar_slam.datasets.mulran import gt_max_gap_ns, interpolate_poses
 from radar_slam.datasets.navtech import (
     ENCODER_TICKS_PER_REV,
     MULRAN_FIRST_ENCODER,
     MULRAN_RANGE_RESOLUTION_M,
     OXFORD_HEADER_BYTES,
     OXFORD_RANGE_RESOLUTION_M,
+    SCAN_RATE_HZ,
     encoder_to_azimuth_ccw,
 )
 from radar_slam.datasets.registry import Family, register
+from radar_slam.datasets.sweep import SweepTimes
 from radar_slam.errors import ConfigError, DatasetFormatError, DatasetNotFoundError
 from radar_slam.trajectory import yaw_from_quaternion
+from raplace import checks
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
@@ -210,7 +213,11 @@ class BagSequence:
         rows: Rows | None = None,
         azimuth_direction: Direction | None = None,
         range_resolution_m: float | None = None,
+        scan_rate_hz: float = SCAN_RATE_HZ,
+        gt_time_offset_s: float = 0.0,
     ) -> None:
+        checks.finite("gt_time_offset_s", gt_time_offset_s)
+        self.gt_time_offset_ns = int(round(gt_time_offset_s * NS_PER_S))
         self.path = Path(path)
         if not self.path.exists():
             raise DatasetNotFoundError(f"{self.path}: bag not found")
@@ -227,6 +234,7 @@ class BagSequence:
         self._connections = self._topic_connections(self.topic, (IMAGE_TYPE,))
         self.gt_topic: str | None = gt_topic or info.get("gt_topic")
         self._index_scans()
+        self._sweep_times = SweepTimes(self._times_ns, scan_rate_hz)
 
     # -- opening ------------------------------------------------------------------------------
     def _open(self) -> AnyReader:
@@ -382,7 +390,9 @@ class BagSequence:
             azimuths_rad=azimuths,
             range_resolution_m=self.layout.range_resolution_m,
             sensor=self.sensor,
-            azimuth_times_ns=times if times is not None and np.any(times) else None,
+            azimuth_times_ns=times
+            if times is not None and np.any(times)
+            else self._sweep_times(index, polar.shape[0]),
         )
 
     @property
@@ -410,7 +420,19 @@ class BagSequence:
         order = np.argsort(np.array(times, dtype=np.int64), kind="stable")
         stamps = np.array(times, dtype=np.int64)[order]
         keep = np.concatenate([[True], np.diff(stamps) > 0])
-        return interpolate_poses(stamps[keep], np.array(poses)[order][keep], self._times_ns)
+        return interpolate_poses(
+            stamps[keep],
+            np.array(poses)[order][keep],
+            self._times_ns + self.gt_time_offset_ns,
+            max_gap_ns=gt_max_gap_ns(stamps[keep]),
+        )
+
+    @property
+    def ground_truth_source(self) -> GroundTruthSource | None:
+        """The bag's ground-truth topic (its accuracy is the recording's own)."""
+        if self.gt_topic is None:
+            return None
+        return GroundTruthSource(f"{self.path}: topic {self.gt_topic} (accuracy not stated)", 0.0)
 
     def close(self) -> None:
         """Close the bag (further frame reads fail)."""
@@ -434,6 +456,8 @@ ROSBAG = register(
             "layout",
             "rows",
             "azimuth_direction",
+            "scan_rate_hz",
+            "gt_time_offset_s",
         ),
     )
 )

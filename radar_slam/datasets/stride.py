@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.datasets.frame import RadarFrame, RadarSequence
+from radar_slam.datasets.frame import GroundTruthSource, RadarFrame, RadarSequence
 from radar_slam.errors import RadarSlamError
 
 
@@ -50,6 +50,11 @@ class ScanSelection:
         """(len, 3) ground truth of the kept scans, or None."""
         gt = self.base.ground_truth
         return None if gt is None else np.asarray(gt, dtype=np.float64)[self.indices]
+
+    @property
+    def ground_truth_source(self) -> GroundTruthSource | None:
+        """The base sequence's."""
+        return self.base.ground_truth_source
 
     def __repr__(self) -> str:
         return f"ScanSelection({self.base!r}, {len(self)} scans)"

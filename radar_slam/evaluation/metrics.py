@@ -43,6 +43,9 @@ DEFAULT_MAX_TIME_DIFF_NS = 1_000_000  # 1 ms: association tolerance by timestamp
 DEFAULT_RPE_DELTA = 1  # frames
 KITTI_SEGMENT_LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 KITTI_START_STEP_FRAMES = 10  # the devkit starts a segment every 10 frames
+GT_ERROR_SHARE_OF_DRIFT = 0.005
+"""Drift uses only segments long enough that the GT's own error is at most 0.5 % of them: with
+metre-level GNSS (2 m) that is 400 m and up; with centimetre GT every KITTI length."""
 PERCENT = 100.0
 PER_100_M = 100.0
 PLANAR_TOLERANCE = 1e-9  # max |off-plane entry| of an alignment rotation/translation
@@ -249,6 +252,14 @@ class KittiDrift:
     segments: int
 
 
+def drift_lengths_m(gt_accuracy_m: float = 0.0) -> tuple[float, ...]:
+    """The KITTI segment lengths a GT of this accuracy [m] can score (see
+    `GT_ERROR_SHARE_OF_DRIFT`); at least the longest one."""
+    shortest = gt_accuracy_m / GT_ERROR_SHARE_OF_DRIFT
+    kept = tuple(length for length in KITTI_SEGMENT_LENGTHS_M if length >= shortest)
+    return kept or KITTI_SEGMENT_LENGTHS_M[-1:]
+
+
 def kitti_drift(
     est: Trajectory,
     gt: Trajectory,
@@ -303,8 +314,13 @@ class TrajectoryMetrics:
     ate_rmse_m: ATE RMSE after SE(2) Umeyama alignment (no scale) [m].
     ate_origin_rmse_m: ATE RMSE after first-pose alignment [m] (radar odometry papers).
     rpe_trans_rmse_m: RPE translation RMSE [m] over the chosen delta (1 frame by default).
-    drift_trans_pct, drift_rot_deg_per_100m: KITTI drift [%], [deg/100 m]; None below 100 m.
+    drift_trans_pct, drift_rot_deg_per_100m: KITTI drift [%], [deg/100 m] over segments of
+        `drift_min_segment_m` and longer; None when the path is shorter.
     poses_matched: number of associated poses.
+    end_point_error_pct: distance between the last associated poses after the Umeyama
+        alignment, per path length of the GT [%].
+    drift_min_segment_m: the shortest KITTI segment the drift averages over [m] (longer for
+        a less accurate GT, see `drift_lengths_m`).
     """
 
     ate_rmse_m: float
@@ -313,6 +329,8 @@ class TrajectoryMetrics:
     drift_trans_pct: float | None
     drift_rot_deg_per_100m: float | None
     poses_matched: int
+    end_point_error_pct: float | None = None
+    drift_min_segment_m: float = KITTI_SEGMENT_LENGTHS_M[0]
 
     def to_dict(self) -> dict[str, float | int | None]:
         """Flat JSON-ready dict with exactly the field names as keys."""
@@ -326,15 +344,18 @@ def evaluate(
     max_diff_ns: int = DEFAULT_MAX_TIME_DIFF_NS,
     rpe_delta: float = DEFAULT_RPE_DELTA,
     rpe_unit: DeltaUnit = "frames",
+    gt_accuracy_m: float = 0.0,
 ) -> TrajectoryMetrics:
     """Associate `est` with `gt` and compute every metric.
 
     A ground truth with NaN rows (scans outside the GT span) should be built with
-    `Trajectory.from_arrays(t, poses, drop_nonfinite=True)`, which drops them.
+    `Trajectory.from_arrays(t, poses, drop_nonfinite=True)`, which drops them. `gt_accuracy_m`
+    (the GT's stated position accuracy) sets the shortest drift segment.
     """
     est_a, gt_a = associate(est, gt, by=by, max_diff_ns=max_diff_ns)
     _require_pairs(est_a, gt_a)
-    drift = kitti_drift(est_a, gt_a)
+    lengths = drift_lengths_m(gt_accuracy_m)
+    drift = kitti_drift(est_a, gt_a, lengths)
     return TrajectoryMetrics(
         ate_rmse_m=ate_rmse(est_a, gt_a, "umeyama"),
         ate_origin_rmse_m=ate_origin_rmse(est_a, gt_a),
@@ -342,4 +363,17 @@ def evaluate(
         drift_trans_pct=None if drift is None else drift.trans_pct,
         drift_rot_deg_per_100m=None if drift is None else drift.rot_deg_per_100m,
         poses_matched=len(est_a),
+        end_point_error_pct=end_point_error_pct(est_a, gt_a),
+        drift_min_segment_m=lengths[0],
     )
+
+
+def end_point_error_pct(est: Trajectory, gt: Trajectory) -> float | None:
+    """Distance between the last poses of associated trajectories after the SE(2) Umeyama
+    alignment, per path length of the GT [%]; None for a GT path of zero length."""
+    length = gt.length_m()
+    if length <= 0:
+        return None
+    aligned = align(est, gt, "umeyama")
+    gap = aligned.poses[-1, :2] - gt.poses[-1, :2]
+    return float(np.hypot(gap[0], gap[1]) / length * PERCENT)

@@ -53,7 +53,7 @@ class VerificationConfig:
     max_sigma_yaw_deg: float = 1.0
     yaw_rate_search: bool = True
 
-    def __post_init__(self) -> None:  # value ranges (issue 12)
+    def __post_init__(self) -> None:  # value ranges
         checks.finite("min_sinogram_quality", self.min_sinogram_quality)
         checks.in_range("min_inlier_fraction", self.min_inlier_fraction, 0.0, 1.0)
         checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
@@ -76,7 +76,7 @@ class LoopCovarianceConfig:
     The de-skew terms (on by default) cover the loops of scans swept while turning or across a
     velocity change at low frame rates, which were far too tight without them; the floors stay
     conservative (the loops' errors on real data are not measured), so at 4 Hz on the simulator
-    the covariances are wider than the errors. docs/odometry_notes.md (covariance notes) gives
+    the covariances are wider than the errors. docs/decisions.md gives
     the settings calibrated against the simulator's ground truth (mean NEES,
     `scripts/bench_nees.py`) and what the choices cost and gain in SLAM accuracy.
 
@@ -92,7 +92,7 @@ class LoopCovarianceConfig:
             `verification.deskew_variance`).
         swept_turn_fraction: a scan swept while turning is de-skewed with a yaw rate whose
             error grows with it (the odometry's rotation bias per deg/s of de-skew error, see
-            docs/odometry_notes.md); this fraction of the rotation over half a sweep at the
+            docs/decisions.md); this fraction of the rotation over half a sweep at the
             scan's yaw rate is added as a rotation standard deviation for each scan [rad]
             (`verification.swept_turn_variance`).
     """
@@ -104,7 +104,7 @@ class LoopCovarianceConfig:
     deskew_error_fraction: float = 0.5
     swept_turn_fraction: float = 0.1
 
-    def __post_init__(self) -> None:  # value ranges (issue 12)
+    def __post_init__(self) -> None:  # value ranges
         checks.non_negative("deskew_error_fraction", self.deskew_error_fraction)
         checks.non_negative("swept_turn_fraction", self.swept_turn_fraction)
         checks.positive("sigma_scale", self.sigma_scale)
@@ -143,7 +143,7 @@ class ConsistencyConfig:
     min_sigma_xy_m: float = 0.1
     min_sigma_yaw_deg: float = 0.2
 
-    def __post_init__(self) -> None:  # value ranges (issue 12)
+    def __post_init__(self) -> None:  # value ranges
         checks.at_least("min_support", self.min_support, 0)
         checks.positive("window_m", self.window_m)
         checks.positive("chi2_threshold", self.chi2_threshold)
@@ -185,7 +185,7 @@ class ThrottleConfig:
     max_stretches: int = 8
     predicted_checks: bool = True
 
-    def __post_init__(self) -> None:  # value ranges (issue 12)
+    def __post_init__(self) -> None:  # value ranges
         checks.at_least("closed_after", self.closed_after, 1)
         checks.non_negative("closed_spacing_m", self.closed_spacing_m)
         checks.non_negative("stretch_tolerance_m", self.stretch_tolerance_m)
@@ -258,10 +258,10 @@ class LoopClosureConfig:
     covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
     throttle: ThrottleConfig = field(default_factory=ThrottleConfig)
-    scan_cache_mb: float = 384.0  # issue-15
-    pose_image_cache_mb: float = 96.0  # issue-15
+    scan_cache_mb: float = 384.0
+    pose_image_cache_mb: float = 96.0
 
-    def __post_init__(self) -> None:  # value ranges (issue 12)
+    def __post_init__(self) -> None:  # value ranges
         checks.non_negative("scan_cache_mb", self.scan_cache_mb)
         checks.non_negative("pose_image_cache_mb", self.pose_image_cache_mb)
         checks.at_least("candidates", self.candidates, 1)

@@ -15,7 +15,7 @@ from radar_slam.graph import GraphConfig
 from radar_slam.loops import (
     LoopClosureConfig,
 )
-from radar_slam.maps.config import MapsConfig  # issue-13: maps section
+from radar_slam.maps.config import MapsConfig
 from raplace import checks
 
 
@@ -49,8 +49,8 @@ class PipelineConfig:
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
-    maps: MapsConfig = field(default_factory=MapsConfig)  # issue-13: map building, localisation
-    concurrency: ConcurrencyConfig = field(default_factory=ConcurrencyConfig)  # issue-15
+    maps: MapsConfig = field(default_factory=MapsConfig)  # map building, localisation
+    concurrency: ConcurrencyConfig = field(default_factory=ConcurrencyConfig)
 
 
 def family_config_path(family: str) -> Path:
@@ -100,6 +100,6 @@ def open_configured(
     config = load_config(sequence.family, path, overrides)
     if config.dataset.loader_options():
         sequence = open_sequence(spec, data_root, config.dataset)
-    _ = sequence.ground_truth  # a malformed GT file fails now, not after the run (issue 12)
+    _ = sequence.ground_truth  # a malformed GT file fails now, not after the run
     _ = sequence[0]  # ... and so does a first scan of the wrong shape or format
     return sequence, config

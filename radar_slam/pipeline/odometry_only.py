@@ -19,6 +19,8 @@ from radar_slam.pipeline.steps import (
     accuracy,
     frame_count,
     ground_truth_of,
+    gt_accuracy_m,
+    gt_report_of,
     sequence_label,
 )
 from radar_slam.trajectory import Trajectory
@@ -56,5 +58,6 @@ def run_odometry(
         ground_truth=gt,
         results=results,
         seconds=seconds,
-        metrics=accuracy(trajectory, gt),
+        metrics=accuracy(trajectory, gt, gt_accuracy_m(sequence)),
+        gt_report=gt_report_of(sequence, gt, {"odometry": trajectory}),
     )

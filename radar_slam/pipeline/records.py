@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry import OdometryResult
+from radar_slam.evaluation.gt_report import GroundTruthReport
 from radar_slam.evaluation.metrics import TrajectoryMetrics
 from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
@@ -52,7 +53,8 @@ class SlamMetrics:
     segments [%] and rotation errors [deg/100 m]; `ate_reduction` = 1 - ate_slam / ate_odometry.
     Fields needing ground truth are None without it (drift also below 100 m of path).
     `scans_with_gt` is how many scans the accuracy figures were computed over, and
-    `scans_without_gt` how many had no ground truth (outside its time span).
+    `scans_without_gt` how many had no ground truth (outside its time span or in an outage).
+    `end_point_*_pct` is the last pose's error after the alignment per path length [%].
     """
 
     frames: int
@@ -75,6 +77,8 @@ class SlamMetrics:
     drift_slam_deg_per_100m: float | None
     scans_with_gt: int | None = None
     scans_without_gt: int | None = None
+    end_point_odometry_pct: float | None = None
+    end_point_slam_pct: float | None = None
 
     def to_dict(self) -> dict[str, float | int | None]:
         return asdict(self)
@@ -98,6 +102,8 @@ class Results:
         timings_s: wall time per pipeline step [s].
         metrics: the summary metrics.
         odometry_metrics, slam_metrics: full accuracy figures, None without ground truth.
+        gt_report: the GT's source and estimated clock offset, with the metrics through that
+            offset; None without ground truth.
     """
 
     sequence: str
@@ -114,6 +120,7 @@ class Results:
     metrics: SlamMetrics
     odometry_metrics: TrajectoryMetrics | None
     slam_metrics: TrajectoryMetrics | None
+    gt_report: GroundTruthReport | None = None
 
     @property
     def accepted_loops(self) -> list[LoopDecision]:
@@ -132,6 +139,7 @@ class OdometryRun:
         results: the odometry's per-scan results.
         seconds: wall time [s].
         metrics: accuracy against GT, None without it.
+        gt_report: the GT's source and estimated clock offset, None without GT.
     """
 
     sequence: str
@@ -141,6 +149,7 @@ class OdometryRun:
     results: list[OdometryResult]
     seconds: float
     metrics: TrajectoryMetrics | None
+    gt_report: GroundTruthReport | None = None
 
     def summary(self) -> dict[str, Any]:
         """metrics.json content: counts, speed, and the accuracy fields when there is GT."""
@@ -156,6 +165,8 @@ class OdometryRun:
             data.update(self.metrics.to_dict())
             data["scans_with_gt"] = self.metrics.poses_matched
             data["scans_without_gt"] = frames - self.metrics.poses_matched
+        if self.gt_report is not None:
+            data["ground_truth"] = self.gt_report.to_dict()
         return data
 
 

@@ -64,6 +64,8 @@ from radar_slam.pipeline.steps import (
     accuracy,
     frame_count,
     ground_truth_of,
+    gt_accuracy_m,
+    gt_report_of,
     odometry_factor,
     review_loops,
     sequence_label,
@@ -242,8 +244,10 @@ class Pipeline:
                 else is_true_loop(d.measurement, gt_poses[d.query_key], gt_poses[d.match_key])
                 for d in loops
             ]
-            odometry_metrics = accuracy(odometry, gt)
-            slam_metrics = accuracy(slam, gt)
+            gt_accuracy = gt_accuracy_m(self.sequence)
+            odometry_metrics = accuracy(odometry, gt, gt_accuracy)
+            slam_metrics = accuracy(slam, gt, gt_accuracy)
+            report = gt_report_of(self.sequence, gt, {"odometry": odometry, "slam": slam})
         metrics = summarise(
             frames=self.frames,
             seconds=seconds,
@@ -269,4 +273,5 @@ class Pipeline:
             metrics=metrics,
             odometry_metrics=odometry_metrics,
             slam_metrics=slam_metrics,
+            gt_report=report,
         )

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from odometry import OdometryResult
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import RadarSlamError, TrajectoryError
+from radar_slam.evaluation.gt_report import GroundTruthReport, ground_truth_report
 from radar_slam.evaluation.metrics import TrajectoryMetrics, evaluate
 from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
@@ -78,15 +79,32 @@ def ground_truth_of(
     return poses, (trajectory if len(trajectory) else None)
 
 
-def accuracy(est: Trajectory, gt: Trajectory | None) -> TrajectoryMetrics | None:
+def gt_accuracy_m(sequence: RadarSequence) -> float:
+    """The stated accuracy of the sequence's GT [m] (0 when not stated)."""
+    source = sequence.ground_truth_source
+    return 0.0 if source is None else source.accuracy_m
+
+
+def accuracy(
+    est: Trajectory, gt: Trajectory | None, gt_accuracy: float = 0.0
+) -> TrajectoryMetrics | None:
     """`metrics.evaluate` or None when there is no ground truth or too little of it."""
     if gt is None:
         return None
     try:
-        return evaluate(est, gt)
+        return evaluate(est, gt, gt_accuracy_m=gt_accuracy)
     except TrajectoryError as exc:
         log.warning("no accuracy figures: %s", exc)
         return None
+
+
+def gt_report_of(
+    sequence: RadarSequence, gt: Trajectory | None, trajectories: dict[str, Trajectory]
+) -> GroundTruthReport | None:
+    """The GT's source and clock offset behind a run's metrics; None without GT."""
+    if gt is None:
+        return None
+    return ground_truth_report(sequence.ground_truth_source, gt, trajectories)
 
 
 def odometry_factor(result: OdometryResult) -> tuple[FloatArray, FloatArray]:
@@ -165,6 +183,8 @@ def summarise(
         drift_slam_pct=None if slam is None else slam.drift_trans_pct,
         drift_odometry_deg_per_100m=None if odometry is None else odometry.drift_rot_deg_per_100m,
         drift_slam_deg_per_100m=None if slam is None else slam.drift_rot_deg_per_100m,
+        end_point_odometry_pct=None if odometry is None else odometry.end_point_error_pct,
+        end_point_slam_pct=None if slam is None else slam.end_point_error_pct,
         scans_with_gt=None if odometry is None else odometry.poses_matched,
         scans_without_gt=None if odometry is None else frames - odometry.poses_matched,
     )

@@ -133,6 +133,7 @@ def open_synthetic(
     range_resolution_m: float | None = None,
     azimuth_offset_rad: float = 0.0,
     scan_rate_hz: float | None = None,
+    gt_time_offset_s: float = 0.0,
 ) -> RadarSequence:
     """Open a simulated sequence with the MulRan loader (bin count, bin size and scan rate from
     world.json).
@@ -140,7 +141,8 @@ def open_synthetic(
     `range_resolution_m` overrides the simulated bin size (the `dataset:` config section), e.g.
     to study a mis-calibrated range resolution; `azimuth_offset_rad` is added to every azimuth
     [rad, CCW] (e.g. to study an encoder zero offset); `scan_rate_hz` overrides the simulated
-    revolutions per second.
+    revolutions per second; `gt_time_offset_s` shifts the ground truth's clock (to study a
+    time offset).
     """
     folder = Path(folder)
     marker = _marker(folder)
@@ -180,6 +182,7 @@ def open_synthetic(
         scan_rate_hz=recorded("scan_rate_hz", SCAN_RATE_HZ)
         if scan_rate_hz is None
         else scan_rate_hz,
+        gt_time_offset_s=gt_time_offset_s,
     )
     frames = marker.get("frames")
     if isinstance(frames, int) and len(sequence) != frames:
@@ -199,6 +202,6 @@ SYNTHETIC = register(
         obtain=SYNTHETIC_OBTAIN,
         resolve=resolve_synthetic,
         detect_priority=1,
-        options=("range_resolution_m", "azimuth_offset_rad", "scan_rate_hz"),
+        options=("range_resolution_m", "azimuth_offset_rad", "scan_rate_hz", "gt_time_offset_s"),
     )
 )

@@ -53,7 +53,7 @@ _TINY_SENSOR = SensorConfig(n_bins=TINY_BINS)
 _TINY_TOWN = TownConfig(n_blocks=(3, 3), block_size_m=(60.0, 90.0))
 """Sensor and town of the `tiny` and `tiny_loop` scenarios."""
 TINY_REVERSE_FRAMES = 90
-"""Scans of `tiny_reverse_a` and `_b` (issue-13)."""
+"""Scans of `tiny_reverse_a` and `_b`."""
 
 
 @dataclass(frozen=True)
@@ -150,11 +150,11 @@ _MULTI_B: Waypoints = (
 )
 _REVERSE_SESSION_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (3, 1))
 """A loop around blocks of the town, driven anticlockwise, its first two blocks again so that
-the map session closes its loop (issue-13: map session)."""
+the map session closes its loop."""
 _REVERSE_SESSION_B: Waypoints = tuple(reversed(_REVERSE_SESSION_A))
 """The same streets clockwise: every street the other way, in the other lane."""
 _TINY_BLOCK: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2), (1, 1))
-"""Once around one block of the tiny town (issue-13: map tests)."""
+"""Once around one block of the tiny town (the map tests)."""
 _LONG_ROUTE: Waypoints = (
     (1, 1),
     (4, 1),
@@ -300,7 +300,7 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
 
 
 _MAP_SCENARIOS: tuple[Scenario, ...] = (
-    Scenario(  # issue-13: a reverse-direction session pair for maps
+    Scenario(  # a reverse-direction session pair for maps
         name="multisession_reverse_a",
         description="the map session of a reverse pair: a loop around town blocks",
         seed=13,
@@ -309,7 +309,7 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         session=0,
         start_ns=EPOCH_NS + 7 * DAY_NS,
     ),
-    Scenario(  # issue-13
+    Scenario(
         name="multisession_reverse_b",
         description="the same streets the other way round, in the other lane, a day later; "
         "parked cars, vegetation and traffic changed",
@@ -319,7 +319,7 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         session=1,
         start_ns=EPOCH_NS + 8 * DAY_NS,
     ),
-    Scenario(  # issue-13: the reverse pair at reduced bins, for CI
+    Scenario(  # the reverse pair at reduced bins, for CI
         name="tiny_reverse_a",
         description="once around a block of the tiny town, reduced bins: map tests",
         seed=11,
@@ -330,7 +330,7 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         sensor=_TINY_SENSOR,
         town=_TINY_TOWN,
     ),
-    Scenario(  # issue-13
+    Scenario(
         name="tiny_reverse_b",
         description="the same block the other way round, other lane, another session",
         seed=11,
@@ -343,7 +343,7 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         town=_TINY_TOWN,
     ),
 )
-"""Session pairs for maps (issue-13): a reverse-direction pair and its reduced-bin version."""
+"""Session pairs for maps: a reverse-direction pair and its reduced-bin version."""
 
 
 def plan_town(**overrides: Any) -> TownConfig:
@@ -407,8 +407,7 @@ _HELD_OUT_JUNCTIONS_ROUTE: Waypoints = (
     (0, 3),
 )
 """A staircase of junction turns on small blocks, a U-turn short of a node and back, then a
-reversing stretch and more turns (issue 10's second held-out drive, added after the first
-was used for diagnosis)."""
+reversing stretch and more turns (a held-out drive)."""
 _HELD_OUT_MIXED_ROUTE: Waypoints = (
     (0, 1),
     (1, 1),
@@ -436,7 +435,7 @@ _HELD_OUT_REVISITS_ROUTE: Waypoints = (
     (2, 3),
 )
 """Round a ring of blocks, on past its start, a U-turn, and back round the ring the other way
-(issue 10's fourth held-out drive, added at stop 14: revisits in both directions)."""
+(a held-out drive with revisits in both directions)."""
 _CI = " Reduced bins (1024, 61 m) for CI."
 _URBAN_SMOOTH = DrivingConfig(min_speed_mps=3.0, cruise_speed_mps=(9.0, 13.5))
 """The smooth lattice drive at urban speeds (<= 14 m/s), slowing for tight corners."""
@@ -620,7 +619,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         held_out=True,
     ),
 )
-"""Scenarios of urban driving the smooth lattice drive lacks (issue 10): turning round, gear
+"""Scenarios of urban driving the smooth lattice drive lacks: turning round, gear
 changes, roundabouts, stops, stepped curvature; and the held-out benchmark scenarios."""
 
 
@@ -647,7 +646,7 @@ HELD_OUT: tuple[str, ...] = tuple(name for name, s in SCENARIOS.items() if s.hel
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "multisession": ("multisession_a", "multisession_b"),
-    "multisession_reverse": ("multisession_reverse_a", "multisession_reverse_b"),  # issue-13
+    "multisession_reverse": ("multisession_reverse_a", "multisession_reverse_b"),
 }
 """Names that stand for several sequences generated together."""
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -87,14 +88,15 @@ def test_interrupted_run_leaves_no_recording(
     capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from radar_slam.pipeline import Pipeline
+    from radar_slam.viewer import RerunViewer
 
-    def interrupted(self: Pipeline) -> None:
-        raise KeyboardInterrupt
+    def interrupted(*args: object) -> None:
+        raise KeyboardInterrupt  # Ctrl-C while the first scan is being logged
 
-    monkeypatch.setattr(Pipeline, "run", interrupted)
+    monkeypatch.setattr(RerunViewer, "on_scan", interrupted)
     target = workdir / "out.rrd"
     outcome = run_cli(capsys, *_run(synthetic_root, "--viewer", target, "--out", workdir / "r"))
     assert outcome.code == 130
     assert "Traceback" not in outcome.stderr
     assert list(workdir.iterdir()) == []
+    assert not [t for t in threading.enumerate() if t.name == "loop-detector" and t.is_alive()]

@@ -126,14 +126,14 @@ def eval_command(
     gt_offset_s: float | None = typer.Option(
         None,
         "--gt-offset",
-        help="A known GT clock offset [s] (GT minus estimate): add rows scored with it applied.",
+        help="A known GT clock offset \\[s] (GT minus estimate): add rows scored with it applied.",
     ),
     gt_accuracy_m: float = typer.Option(
         0.0,
         "--gt-accuracy",
         min=0.0,
         max=MAX_GT_ACCURACY_M,
-        help="Position accuracy of the GT [m]: drift then uses only segments long enough for "
+        help="Position accuracy of the GT \\[m]: drift then uses only segments long enough for "
         "it (2 for GNSS without RTK: 400-800 m).",
     ),
 ) -> None:

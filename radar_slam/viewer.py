@@ -153,7 +153,7 @@ class RerunViewer:
             self.stream.spawn()
         else:
             final = Path(target)
-            remove_stale_partials(final.parent)
+            remove_stale_partials(final.parent, final.name)  # a killed run's recording
             self.staging = final.parent / f".{final.name}{PARTIAL_SUFFIX}{os.getpid()}"
             self.stream.save(str(self.staging))
         self._warper: CartesianWarper | None = None

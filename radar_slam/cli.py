@@ -1,104 +1,43 @@
-"""The `radar-slam` command line: one Typer app, one module per command group.
+"""The `radar-slam` console script: installs the signal handlers, then loads and runs the app
+(`radar_slam.cli_app`).
 
-Each module in `radar_slam/commands/` has `register(app)`. User errors (RadarSlamError and the
-pure packages' error classes) become one line on stderr and exit code 1.
+The app's modules (NumPy, GTSAM, every command) load inside `main`, after the handlers are in
+place, so that Ctrl-C or SIGTERM during start-up ends like one during the work: one line, exit
+code 130 or 143, no traceback (`radar_slam.signals`).
 """
 
 from __future__ import annotations
 
-import importlib
-import logging
 import sys
+from typing import Any
 
-import typer
-from typer._click.exceptions import ClickException, NoArgsIsHelpError, UsageError
-
-from odometry import OdometryError
-from radar_slam import __version__
-from radar_slam.errors import RadarSlamError
-from radar_slam.viewer import viewer_argv
-from raplace import RaPlaceError
-
-COMMAND_MODULES = (
-    "data",
-    "evaluate",
-    "simulate",
-    "placerec",
-    "run",
-    "loops",
-    "export",
-    "batch",
-    "maps",
-)
-
-app = typer.Typer(
-    name="radar-slam",
-    help="Radar SLAM for scanning FMCW radar: odometry, RaPlace loop closure, pose graph.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
-
-
-def _version(value: bool) -> None:
-    if value:
-        typer.echo(f"radar-slam {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _root(
-    version: bool = typer.Option(
-        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
-    ),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details."),
-) -> None:
-    logging.basicConfig(
-        level=logging.INFO if verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
-
-
-for _name in COMMAND_MODULES:
-    importlib.import_module(f"radar_slam.commands.{_name}").register(app)
+from radar_slam import signals
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit code.
-
-    User errors, a bad option value included, become one line on stderr and exit code 1;
-    Ctrl-C exits with code 130; anything else is a bug and keeps its traceback.
-    """
-    arguments = viewer_argv(sys.argv[1:] if argv is None else argv)  # a bare --viewer
+    """Entry point of the console script; returns the exit code (see `cli_app.run_app`)."""
+    previous = signals.install()
     try:
-        code = app(args=arguments, standalone_mode=False)
-    except SystemExit as exc:
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-    except NoArgsIsHelpError as exc:
-        exc.show()
-        return exc.exit_code
-    except UsageError as exc:  # a bad option or argument: one line too
-        command = exc.ctx.command_path if exc.ctx is not None else "radar-slam"
-        typer.echo(f"radar-slam: error: {command}: {_one_line(exc.format_message())}", err=True)
-        return 1
-    except ClickException as exc:
-        typer.echo(f"radar-slam: error: {_one_line(exc.format_message())}", err=True)
-        return 1
-    except typer.Abort:
-        typer.echo("radar-slam: interrupted", err=True)
-        return INTERRUPTED_EXIT_CODE
-    except (RadarSlamError, RaPlaceError, OdometryError) as exc:
-        typer.echo(f"radar-slam: error: {exc}", err=True)
-        return 1
-    return code if isinstance(code, int) else 0
+        from radar_slam.cli_app import run_app
+
+        return run_app(sys.argv[1:] if argv is None else argv)
+    except KeyboardInterrupt:
+        return signals.interrupted()
+    except ImportError:
+        if signals.was_interrupted():  # some packages re-raise an interrupt as ImportError
+            return signals.interrupted()
+        raise
+    finally:
+        signals.restore(previous)
 
 
-INTERRUPTED_EXIT_CODE = 130
-"""Exit code after Ctrl-C (128 + SIGINT), as shells report it."""
+def __getattr__(name: str) -> Any:
+    """`app` (the Typer app), loaded on first use."""
+    if name == "app":
+        from radar_slam.cli_app import app
 
-
-def _one_line(text: str) -> str:
-    return " ".join(text.split())
+        return app
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 if __name__ == "__main__":

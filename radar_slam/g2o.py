@@ -9,7 +9,7 @@ Format (one item per line, whitespace separated; blank lines and `#` comments ar
 `(dx, dy, dtheta)` is the pose of vertex j in the frame of vertex i (T_i^-1 T_j), and `I..` the
 upper triangle of its 3 x 3 information matrix (inverse covariance), order (x, y, theta). Units
 are metres and radians. Other tags (landmark vertices, 3-D types, ...) are skipped with one logged
-warning per tag, or rejected with `strict=True`. Every malformed line raises `GraphFormatError`
+warning, or rejected with `strict=True`. Every malformed line raises `GraphFormatError`
 naming the file and line.
 
 Numbers are written with `repr`, the shortest text that reads back to the same float, so
@@ -196,16 +196,16 @@ def _parse(lines: Iterable[str], source: str, strict: bool) -> G2oGraph:
         else:
             skipped[tag] += 1
             first_skipped.setdefault(tag, lineno)
-    for tag, count in skipped.items():
-        log.warning(
-            "%s: skipped %d line(s) with unsupported tag %s (first at line %d)",
-            source,
-            count,
-            tag,
-            first_skipped[tag],
-        )
     if not vertices:
         raise GraphFormatError(f"{source}: no {VERTEX_TAG} lines")
+    if skipped:
+        log.warning(
+            "%s: skipped %d line(s) with unsupported tags %s (first at line %d)",
+            source,
+            sum(skipped.values()),
+            _tag_list(skipped),
+            min(first_skipped.values()),
+        )
     for edge, lineno in zip(edges, edge_lines, strict=True):
         for key in (edge.i, edge.j):
             if key not in vertices:
@@ -214,6 +214,18 @@ def _parse(lines: Iterable[str], source: str, strict: bool) -> G2oGraph:
         if key not in vertices:
             raise GraphFormatError(f"{source}:{lineno}: FIX refers to missing vertex {key}")
     return G2oGraph(vertices, edges, list(dict.fromkeys(k for k, _ in fixed)))
+
+
+MAX_TAGS_NAMED = 5
+"""A warning about skipped lines names at most this many of their tags."""
+
+
+def _tag_list(skipped: Counter[str]) -> str:
+    """The most frequent skipped tags with their counts, and how many others."""
+    common = skipped.most_common(MAX_TAGS_NAMED)
+    text = ", ".join(f"{tag[:40]} ({count})" for tag, count in common)
+    others = len(skipped) - len(common)
+    return text + (f" and {others} other(s)" if others else "")
 
 
 def read_g2o(path: Path | str, strict: bool = False) -> G2oGraph:

@@ -114,9 +114,26 @@ def write_loops_csv(path: Path, loops: list[LoopDecision], true_loops: list[bool
             )
 
 
+def finite_json(value: Any) -> Any:
+    """`value` with every NaN or infinite float (also inside lists and dicts) made None, so that
+    it is valid JSON (null) rather than a bare NaN."""
+    if isinstance(value, dict):
+        return {key: finite_json(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_json(item) for item in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def json_text(content: Any) -> str:
+    """Strict, indented JSON (non-finite numbers as null) with a trailing newline."""
+    return json.dumps(finite_json(content), indent=2, allow_nan=False) + "\n"
+
+
 def write_json(path: Path, content: dict[str, Any]) -> None:
-    """Indented JSON with a trailing newline."""
-    Path(path).write_text(json.dumps(content, indent=2) + "\n")
+    """Indented strict JSON with a trailing newline (non-finite numbers as null)."""
+    Path(path).write_text(json_text(content))
 
 
 def _fmt(value: float | int | None, spec: str, unit: str = "") -> str:
@@ -205,7 +222,7 @@ def write_results(folder: Path, results: Results) -> list[Path]:
     slam = aligned_to(results.slam, gt)
     curves = {"odometry": aligned_to(results.odometry, gt), "slam": slam}
     if gt is not None:
-        write_tum(folder / GT_FILE, gt)
+        write_trajectory(folder, "gt", gt)  # gt.tum and gt.kitti
         curves = {"gt": gt, **curves}
     write_loops_csv(folder / LOOPS_FILE, results.loops, results.true_loops)
     write_pose_graph(folder / GRAPH_FILE, results.graph)
@@ -258,7 +275,7 @@ def write_odometry_results(folder: Path, run: OdometryRun) -> list[Path]:
     write_json(folder / METRICS_FILE, run.summary())
     (folder / SUMMARY_FILE).write_text(odometry_summary(run))
     if run.ground_truth is not None:
-        write_tum(folder / GT_FILE, run.ground_truth)
+        write_trajectory(folder, "gt", run.ground_truth)
         plot_trajectories(
             folder / PLOT_FILE,
             {"gt": run.ground_truth, "odometry": aligned_to(run.trajectory, run.ground_truth)},

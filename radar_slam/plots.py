@@ -25,6 +25,13 @@ LOOP_LINE_WIDTH = 0.5
 LOOP_COLOR = "tab:red"
 LOOP_ALPHA = 0.6
 LOOP_COLUMNS = 4
+LOOP_MARKER_SIZE = 18.0
+"""Loops are also marked at their query position: on an optimised trajectory the two ends of a
+loop coincide, and its segment alone would be invisible."""
+TRAJECTORY_COLOURS = {GT_KEY: "black", "odometry": "tab:blue", "slam": "tab:orange"}
+"""The same colours in every figure (trajectory.png, batch's summary.png) and the viewer."""
+GT_Z_ORDER = 3
+"""GT is drawn over the estimates (dashed), so that it is never hidden under them."""
 
 
 def _new_figure() -> Figure:
@@ -52,8 +59,9 @@ def plot_trajectories(
 ) -> None:
     """Save a top view (x right, y up, equal axes [m]) of the trajectories as a PNG.
 
-    The entry named "gt", if any, is drawn first in black. `loops` is an (M, 4) array of
-    (x1, y1, x2, y2) [m] rows, drawn as thin lines (e.g. accepted loop closures). Everything is
+    The entry named "gt", if any, is listed first and drawn dashed in black over the others;
+    colours are `TRAJECTORY_COLOURS`. `loops` is an (M, 4) array of (x1, y1, x2, y2) [m] rows,
+    drawn as thin lines with a ring at (x1, y1) (e.g. accepted loop closures). Everything is
     drawn relative to `display_origin`, which the axis labels state when it is not zero.
     """
     figure = _new_figure()
@@ -62,7 +70,9 @@ def plot_trajectories(
     names = sorted(trajectories, key=lambda name: name != GT_KEY)  # gt first, order kept
     for name in names:
         xy = trajectories[name].positions - origin
-        style: dict[str, Any] = {"color": "black"} if name == GT_KEY else {}
+        style: dict[str, Any] = {"color": TRAJECTORY_COLOURS.get(name)}
+        if name == GT_KEY:
+            style.update(linestyle="--", zorder=GT_Z_ORDER)
         axes.plot(xy[:, 0], xy[:, 1], label=name, linewidth=TRAJECTORY_LINE_WIDTH, **style)
     if loops is not None and len(loops):
         segments = np.asarray(loops, dtype=np.float64).reshape(-1, LOOP_COLUMNS).reshape(-1, 2, 2)
@@ -74,8 +84,17 @@ def plot_trajectories(
                 colors=LOOP_COLOR,
                 linewidths=LOOP_LINE_WIDTH,
                 alpha=LOOP_ALPHA,
-                label=f"loops ({len(segments)})",
             )
+        )
+        axes.scatter(
+            segments[:, 0, 0],
+            segments[:, 0, 1],
+            s=LOOP_MARKER_SIZE,
+            facecolors="none",
+            edgecolors=LOOP_COLOR,
+            linewidths=LOOP_LINE_WIDTH * 2,
+            label=f"loop closures ({len(segments)})",
+            zorder=GT_Z_ORDER + 1,
         )
     axes.set_aspect("equal", adjustable="datalim")
     shifted = bool(np.any(origin != 0.0))

@@ -98,12 +98,12 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
-def remove_stale_partials(parent: Path) -> None:
-    """Delete `.<name>.partial-<pid>` folders (and links) in `parent` whose writing process
-    has died."""
+def remove_stale_partials(parent: Path, name: str | None = None) -> None:
+    """Delete `.<name>.partial-<pid>` folders, files and links in `parent` whose writing process
+    has died (of the given `name` only, or any)."""
     if not parent.is_dir():
         return
-    for partial in parent.glob(f".*{PARTIAL_SUFFIX}*"):
+    for partial in parent.glob(f".{name or '*'}{PARTIAL_SUFFIX}*"):
         pid_text = partial.name.rsplit(PARTIAL_SUFFIX, 1)[-1]
         if not pid_text.isdigit() or pid_alive(int(pid_text)):
             continue
@@ -126,6 +126,14 @@ def point_latest(folder: Path) -> None:
         temporary.unlink()
     temporary.symlink_to(folder.name)
     os.replace(temporary, latest)
+
+
+def final_of_staging(staging: Path) -> Path:
+    """The final path of a hidden staging folder `.<name>.partial-<pid>` (`write_result_dir`
+    renames it there), for writers that record paths inside the folder they fill."""
+    staging = Path(staging)
+    name = staging.name.removeprefix(".").rsplit(PARTIAL_SUFFIX, 1)[0]
+    return staging.parent / name
 
 
 def write_result_dir(
@@ -205,8 +213,10 @@ def check_output_file(path: Path, option: str, force: bool = False) -> None:
 
 
 def write_text_atomically(path: Path, text: str) -> None:
-    """Write `text` to a temporary sibling, then rename it over `path` (never half a file)."""
+    """Write `text` to a temporary sibling, then rename it over `path` (never half a file); the
+    leftovers of a writer of `path` killed earlier are removed first."""
     path = Path(path)
+    remove_stale_partials(path.parent, path.name)  # what a killed writer of it left
     temporary = path.parent / f".{path.name}{PARTIAL_SUFFIX}{os.getpid()}"
     try:
         temporary.write_text(text)

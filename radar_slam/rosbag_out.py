@@ -1,9 +1,10 @@
 """Writing ROS bags: any sequence we read, and a run's trajectories (`radar-slam export`).
 
-Output format by name: `OUT.bag` is a ROS 1 bag; any other name is a ROS 2 bag folder whose
-storage is MCAP (the ROS 2 default since Iron) or sqlite3. Written with `rosbags` (rosbag2
-metadata version 8), atomically: into a temporary sibling, renamed into place at the end; an
-existing OUT is never touched.
+Output format by name: `OUT.bag` is a ROS 1 bag (`OUT.BAG` is refused); any other name is a
+ROS 2 bag folder whose storage is MCAP (the ROS 2 default since Iron) or sqlite3. Written with
+`rosbags` (rosbag2 metadata version 8), atomically: into a temporary sibling, renamed into place
+at the end; an existing OUT is never touched, and a killed export's leftovers are removed by the
+next export into the same folder.
 
 A sequence bag holds:
 
@@ -44,6 +45,7 @@ from radar_slam.datasets.frame import RadarFrame, Sequence
 from radar_slam.datasets.navtech import ENCODER_TICKS_PER_REV, encoder_to_azimuth_ccw
 from radar_slam.datasets.rosbag import IMAGE_TYPE, ROS1_SUFFIX, SCAN_INFO_TOPIC
 from radar_slam.errors import ResultsError
+from radar_slam.results import remove_stale_partials
 from radar_slam.trajectory import Trajectory, quaternion_from_yaw
 from raplace.units import NS_PER_S
 
@@ -140,18 +142,43 @@ class BagOut:
         self._writer.write(self._connections[topic], int(stamp_ns), data)
 
 
-@contextmanager
-def open_bag(out: Path, storage: Storage = "mcap") -> Iterator[BagOut]:
-    """Write a bag at `out` atomically (temporary sibling, renamed when complete).
+def check_bag_out(out: Path) -> None:
+    """Fail before any work unless the bag `out` can be created: it does not exist, and its
+    folder exists and is writable.
 
     Raises:
-        ResultsError: `out` exists already.
+        ResultsError: one line naming `out` and what stands in the way.
     """
     out = Path(out)
     if out.exists() or out.is_symlink():
         raise ResultsError(f"{out}: exists already; choose another --bag (never overwritten)")
+    if out.suffix.lower() == ROS1_SUFFIX and out.suffix != ROS1_SUFFIX:
+        raise ResultsError(
+            f"{out}: a ROS 1 bag is named *{ROS1_SUFFIX} in lower case (ROS tools read no other); "
+            f"choose {out.with_suffix(ROS1_SUFFIX).name}, or a name without it for a ROS 2 bag"
+        )
+    folder = out.parent
+    if not folder.exists():
+        raise ResultsError(f"{out}: folder {folder} does not exist (--bag)")
+    if not folder.is_dir():
+        raise ResultsError(f"{out}: {folder} is not a folder (--bag)")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ResultsError(f"{out}: folder {folder} is not writable (--bag)")
+
+
+@contextmanager
+def open_bag(out: Path, storage: Storage = "mcap") -> Iterator[BagOut]:
+    """Write a bag at `out` atomically (temporary sibling, renamed when complete); leftovers of
+    an export killed earlier next to it (`.<name>.partial-<pid>` of a dead process) are removed.
+
+    Raises:
+        ResultsError: `out` exists already, or its folder is missing or not writable.
+    """
+    out = Path(out)
+    check_bag_out(out)
+    remove_stale_partials(out.parent)  # what a killed export left next to it
     staging = out.parent / f".{out.name}{PARTIAL}{os.getpid()}"
-    staging.mkdir(parents=True)
+    staging.mkdir()
     try:
         with BagOut(staging / out.name, storage) as bag:
             yield bag

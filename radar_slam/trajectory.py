@@ -373,6 +373,7 @@ TRAJECTORY_FORMATS = ("tum", "kitti")
 def detect_format(path: Path | str) -> str:
     """Guess "tum" or "kitti" from the column count of the first pose line."""
     path = Path(path)
+    _refuse_pose_graph(path)
     number, tokens = _data_lines(path)[0]
     if len(tokens) == TUM_COLUMNS:
         return "tum"
@@ -384,8 +385,24 @@ def detect_format(path: Path | str) -> str:
     )
 
 
+POSE_GRAPH_TAGS = ("VERTEX_SE2", "EDGE_SE2", "FIX")
+"""First words of a g2o pose-graph line (`radar-slam loops` writes such files)."""
+
+
+def _refuse_pose_graph(path: Path | str) -> None:
+    """A g2o pose graph is no trajectory: its vertices carry no timestamps to match."""
+    lines = _data_lines(Path(path))
+    if lines and lines[0][1] and lines[0][1][0] in POSE_GRAPH_TAGS:
+        raise TrajectoryError(
+            f"{path}: a g2o pose graph, not a trajectory: its vertices carry no timestamps to "
+            "match with the ground truth (evaluate a TUM or KITTI file, e.g. the slam.tum of a "
+            "`radar-slam run`)"
+        )
+
+
 def read_trajectory(path: Path | str, fmt: str = "auto") -> Trajectory:
     """Read a trajectory file in format `fmt` ("tum", "kitti" or "auto" by column count)."""
+    _refuse_pose_graph(path)
     fmt = detect_format(path) if fmt == "auto" else fmt
     if fmt == "tum":
         return read_tum(path)

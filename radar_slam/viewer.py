@@ -3,9 +3,13 @@
 Optional: needs the `viewer` extra (`pip install 'radar-slam[viewer]'`, i.e. rerun-sdk); without
 it `--viewer` fails before any work with one line saying so, and nothing else changes.
 
-`--viewer` alone spawns the Rerun viewer; `--viewer FILE.rrd` saves a recording instead (open it
-later with `rerun FILE.rrd`). Entities, on the timeline `scan` (scan index) and `time` (scan
-timestamp):
+`--viewer` alone spawns the Rerun viewer (on Linux it needs a display: without one it fails
+before any work, saying how to save a recording instead); `--viewer FILE.rrd` saves a recording
+(open it later with `rerun FILE.rrd`, or `rerun --web-viewer FILE.rrd` on a machine without a
+display). The recording is written under a hidden temporary name (`.FILE.rrd.partial-<pid>`) and
+renamed once the run is complete, so a killed run never leaves a broken recording under the
+final name; the next run that records next to it removes such leftovers. Entities, on the
+timeline `scan` (scan index) and `time` (scan timestamp):
 
     radar/scan              the scan as a Cartesian image in the vehicle frame (+x forward up,
                             +y left to the left), 512 x 512, JPEG
@@ -25,6 +29,8 @@ last scan, so the end of each entity's timeline is the final result.
 from __future__ import annotations
 
 import logging
+import os
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
+from radar_slam.results import PARTIAL_SUFFIX, remove_stale_partials
 from raplace.se2 import compose, inverse
 from raplace.warp import CartesianGrid, CartesianWarper
 
@@ -44,6 +51,12 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 INSTALL_HINT = "--viewer needs rerun-sdk, which is not installed: pip install 'radar-slam[viewer]'"
+NO_DISPLAY_HINT = (
+    "--viewer: no display (DISPLAY and WAYLAND_DISPLAY are unset), so the Rerun viewer cannot "
+    "open; save a recording instead with --viewer out.rrd and open it where there is a display "
+    "(rerun out.rrd) or in a browser (rerun --web-viewer out.rrd)"
+)
+DISPLAY_VARIABLES = ("DISPLAY", "WAYLAND_DISPLAY")
 SPAWN = "spawn"
 """`--viewer` without a file: spawn the Rerun viewer."""
 RECORDING_SUFFIX = ".rrd"
@@ -64,6 +77,32 @@ def import_rerun() -> Any:
     except ImportError as exc:
         raise RadarSlamError(INSTALL_HINT) from exc
     return rerun
+
+
+def check_viewer_target(target: str) -> None:
+    """Fail before any work when `--viewer TARGET` could not work.
+
+    Spawning needs a display on Linux; a recording needs an existing, writable folder and a file
+    name that is free (recordings are never overwritten).
+
+    Raises:
+        RadarSlamError: one line naming the problem (and the file).
+    """
+    if target == SPAWN:
+        headless = not any(os.environ.get(name) for name in DISPLAY_VARIABLES)
+        if sys.platform.startswith("linux") and headless:
+            raise RadarSlamError(NO_DISPLAY_HINT)
+        return
+    path = Path(target)
+    folder = path.parent
+    if path.exists() or path.is_symlink():
+        raise RadarSlamError(f"{path}: recording exists already; choose another --viewer file")
+    if not folder.exists():
+        raise RadarSlamError(f"{path}: folder {folder} does not exist (--viewer)")
+    if not folder.is_dir():
+        raise RadarSlamError(f"{path}: {folder} is not a folder (--viewer)")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise RadarSlamError(f"{path}: folder {folder} is not writable (--viewer)")
 
 
 def viewer_argv(argv: list[str]) -> list[str]:
@@ -95,21 +134,28 @@ class RerunViewer:
             not exist: recordings are never overwritten).
         name: recording name, e.g. "synthetic/tiny_loop".
 
+    A recording is written to a hidden temporary sibling and renamed to `target` by `on_finish`;
+    `abandon` removes it when the run does not complete.
+
     Raises:
-        RadarSlamError: rerun-sdk is not installed, or the recording file exists.
+        RadarSlamError: rerun-sdk is not installed, no display to spawn on, or the recording
+            file exists or its folder is unusable.
     """
 
     def __init__(self, target: str, name: str) -> None:
         self.rr = import_rerun()
+        check_viewer_target(target)
         self.target = target
-        if target != SPAWN and Path(target).exists():
-            raise RadarSlamError(f"{target}: recording exists already; choose another file")
         self.stream = self.rr.RecordingStream(APPLICATION_ID)
         self.stream.send_recording_name(name)
+        self.staging: Path | None = None
         if target == SPAWN:
             self.stream.spawn()
         else:
-            self.stream.save(target)
+            final = Path(target)
+            remove_stale_partials(final.parent, final.name)  # a killed run's recording
+            self.staging = final.parent / f".{final.name}{PARTIAL_SUFFIX}{os.getpid()}"
+            self.stream.save(str(self.staging))
         self._warper: CartesianWarper | None = None
         self._odometry: list[NDArray[np.float64]] = []
         self._keyframes: list[NDArray[np.float64]] = []
@@ -148,10 +194,28 @@ class RerunViewer:
             gt = self._anchor_gt(results.ground_truth_poses)
             self.stream.log("world/gt", self._strip(gt, "gt"))
         self._log_loops(results.loops, results.slam.poses)
+        if self.staging is None:
+            try:
+                self.stream.flush()
+            except RuntimeError as exc:  # the spawned viewer is gone; the results still count
+                logger.warning("the Rerun viewer did not take the run (%s)", exc)
+            return
         self.stream.flush()
-        if self.target != SPAWN:
+        if self.staging is not None:
             self.stream.disconnect()
+            os.link(self.staging, self.target)  # fails rather than replace a file made meanwhile
+            self.staging.unlink()
+            self.staging = None
             logger.info("viewer recording written to %s", self.target)
+
+    def abandon(self) -> None:
+        """The run did not complete: remove the temporary recording (nothing else was made)."""
+        if self.staging is not None:
+            try:
+                self.stream.disconnect()
+            finally:
+                self.staging.unlink(missing_ok=True)
+                self.staging = None
 
     # -- helpers ------------------------------------------------------------------------------
     def _set_time(self, index: int, timestamp_ns: int) -> None:

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import hashlib
 import os
+import signal
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,3 +81,22 @@ def assert_refused(
     line = assert_one_line_error(run_cli(capsys, *args), *expected)
     assert tree_state(*roots) == before
     return line
+
+
+def _default_sigint() -> None:
+    # A test runner started as a background job inherits SIGINT ignored, and so would the
+    # child: restore the default so that SIGINT acts as Ctrl-C in a terminal.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def start(args: list[str | Path], cwd: Path) -> subprocess.Popen[bytes]:
+    """`radar-slam ARGS` as a subprocess in `cwd` (stderr piped), to be sent signals."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    return subprocess.Popen(
+        [sys.executable, "-m", "radar_slam.cli", *map(str, args)],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        preexec_fn=_default_sigint,
+    )

@@ -301,6 +301,14 @@ CASES: dict[str, Setup] = {
         ],
         ["a.tum"],
     ),
+    "eval: a g2o pose graph": lambda w, r: (
+        [
+            "eval",
+            _tum(w, "out.g2o", "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n"),
+            _tum(w, "b.tum", TUM_OK),
+        ],
+        ["out.g2o", "g2o pose graph", "no timestamps"],
+    ),
     "eval: not UTF-8": lambda w, r: (
         ["eval", _bytes(w / "a.tum", b"\xff\xfe\x00 1\n"), _tum(w, "b.tum", TUM_OK)],
         ["a.tum"],
@@ -404,3 +412,21 @@ def test_read_only_output_location(
         assert_refused(capsys, roots, args, "locked", "not writable")
     finally:
         locked.chmod(0o700)
+
+
+@pytest.mark.parametrize("spec", ["tyni", "synthetic/tyni", "nothing_like_it"])
+def test_mistyped_sequence_is_a_short_line_with_the_closest_names(
+    spec: str,
+    tiny: RadarSequence,
+    synthetic_root: Path,
+    workdir: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    args: list[str | Path] = ["info", spec, "--data-root", synthetic_root]
+    line = assert_refused(capsys, (workdir, synthetic_root), args, spec)
+    assert len(line) < 400, line
+    assert "radar-slam list" in line or "simulate --help" in line
+    if spec == "nothing_like_it":
+        assert "closest" not in line
+    else:
+        assert "tiny" in line.split("closest: ")[1]

@@ -6,7 +6,6 @@ is refused with one line (and replaced by `simulate --force`)."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -15,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from bad_input_support import assert_one_line_error, run_cli
+from bad_input_support import assert_one_line_error, run_cli, start
 
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
@@ -27,24 +26,6 @@ TIMEOUT_S = 120.0
 RUN_FRAMES = "6"
 # the killed "running" case: the whole of `tiny`, so that writing starts seconds after the kill
 RUNNING_FRAMES = "60"
-
-
-def _default_sigint() -> None:
-    # A test runner started as a background job inherits SIGINT ignored, and so would the
-    # child: restore the default so that SIGINT acts as Ctrl-C in a terminal.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def start(args: list[str | Path], cwd: Path) -> subprocess.Popen[bytes]:
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    return subprocess.Popen(
-        [sys.executable, "-m", "radar_slam.cli", *map(str, args)],
-        cwd=cwd,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        preexec_fn=_default_sigint,
-    )
 
 
 def kill_when(
@@ -177,3 +158,22 @@ def test_interrupted_writer_leaves_nothing(tmp_path: Path, monkeypatch: pytest.M
     with pytest.raises(KeyboardInterrupt):
         write_result_dir("f", "s", half_then_interrupt, out=out)
     assert not out.exists() and not list(tmp_path.glob(".out*"))
+
+
+def test_next_writer_removes_a_killed_writers_leftovers(tmp_path: Path) -> None:
+    """`.<name>.partial-<pid>` of a dead process is removed by the next writer of <name>; other
+    names' leftovers are not its business."""
+    from radar_slam.results import write_text_atomically
+
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
+    mine = tmp_path / f".m.json{PARTIAL_SUFFIX}{dead}"
+    other = tmp_path / f".other.g2o{PARTIAL_SUFFIX}{dead}"
+    mine.write_text("half")
+    other.write_text("half")
+    write_text_atomically(tmp_path / "m.json", "{}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [other.name, "m.json"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import logging
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +61,9 @@ def test_scans_past_the_gt_have_none_and_ate_equals_the_full_gt_one(
     metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
     assert metrics["scans_with_gt"] == COVERED
     assert metrics["scans_without_gt"] == FRAMES - COVERED
+    assert len(read_tum(tmp_path / "res" / "gt.tum")) == len(
+        (tmp_path / "res" / "gt.kitti").read_text().splitlines()
+    )  # gt.kitti too, for `eval --format kitti`
     summary = (tmp_path / "res" / "summary.txt").read_text()
     assert f"accuracy over {COVERED} of {FRAMES} scans ({FRAMES - COVERED} without" in summary
 
@@ -152,3 +156,56 @@ def test_eval_reads_integer_tum_stamps(
     assert ate and ate_int and ate[0].split()[1:] == ate_int[0].split()[1:]
     assert f"integer timestamps read as {unit}" in caplog.text
     np.testing.assert_array_equal(read_tum(tmp_path / "gt_int.tum").timestamps_ns, t)
+
+
+GT_EVERY = 25
+"""Rows of tiny's 100 Hz global_pose.csv kept for a 4 Hz ground truth ..."""
+GT_OFFSET = 12
+"""... starting 0.12 s in, so that every scan lies between two GT samples."""
+
+
+def thin_gt(folder: Path, keep: Callable[[int], bool] = lambda t: True) -> None:
+    """Keep every GT_EVERY-th global_pose.csv row from GT_OFFSET on whose time passes `keep`."""
+    path = folder / "global_pose.csv"
+    rows = path.read_text().splitlines()[GT_OFFSET::GT_EVERY]
+    path.write_text("\n".join(r for r in rows if keep(int(r.split(",")[0]))) + "\n")
+
+
+@pytest.mark.parametrize("where", ["end", "outage"])
+def test_scans_beyond_a_coarse_gt_have_none_and_the_ate_is_the_full_gt_one(
+    where: str,
+    tiny: RadarSequence,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Known answer with a 4 Hz GT (tolerance 0.25 s): GT ending 0.13 s before scan COVERED
+    (which the end pose would have been held for), or an outage of 2 s; the scans there have
+    no GT and are counted, and the ATE over the others is the one with the whole 4 Hz GT."""
+    full = tiny_copy(tiny, tmp_path / "full")
+    partial = tiny_copy(tiny, tmp_path / "partial")
+    thin_gt(full)
+    stamps = open_sequence(full).timestamps_ns
+    if where == "end":
+        last = int(stamps[COVERED - 1]) + 120_000_000
+        thin_gt(partial, lambda t: t <= last)
+    else:
+        start, stop = int(stamps[3]) - 200_000_000, int(stamps[8]) + 200_000_000
+        thin_gt(partial, lambda t: not start < t < stop)
+    gt_full = open_sequence(full).ground_truth
+    gt_partial = open_sequence(partial).ground_truth
+    assert gt_full is not None and gt_partial is not None
+    has_gt = np.isfinite(gt_partial[:FRAMES, 0])
+    expected_missing = FRAMES - COVERED if where == "end" else 8  # scans 2..9
+    assert int((~has_gt).sum()) == expected_missing
+
+    monkeypatch.chdir(tmp_path)
+    outcome = run_cli(capsys, "odometry", partial, "--max-frames", FRAMES, "--out", "res")
+    assert outcome.code == 0, outcome.stderr
+    metrics = json.loads((tmp_path / "res" / "metrics.json").read_text())
+    assert metrics["scans_without_gt"] == expected_missing
+    odometry = read_tum(tmp_path / "res" / "odometry.tum")
+    mask = np.flatnonzero(has_gt)
+    reference = Trajectory(stamps[mask], gt_full[mask])
+    expected = evaluate(odometry[mask], reference).ate_rmse_m
+    assert abs(metrics["ate_rmse_m"] - expected) < 1e-3

@@ -14,6 +14,7 @@ from radar_slam.datasets import MulRanSequence, RadarSequence
 from radar_slam.datasets.mulran import (
     OXFORD_FORM_FOLDERS,
     POLAR_FOLDERS,
+    gt_max_gap_ns,
     interpolate_poses,
     is_mulran_sequence,
 )
@@ -173,16 +174,27 @@ def test_ground_truth_interpolated_with_extrinsic(tmp_path: Path, mulran_raw_dir
     assert abs(base[0, 0] - nearest[0]) > 0.25
 
 
-def test_interpolation_wraps_yaw_and_clamps() -> None:
+def test_interpolation_wraps_yaw_and_never_holds_an_end() -> None:
     times = np.array([0, NS_PER_S], dtype=np.int64)
     poses = np.array([[0.0, 0.0, np.pi - 0.1], [2.0, 4.0, -np.pi + 0.1]])
-    queries = np.array([500_000_000, -400_000_000, 1_400_000_000, 1_600_000_000], dtype=np.int64)
+    queries = np.array([500_000_000, -1, NS_PER_S + 1, NS_PER_S], dtype=np.int64)
     result = interpolate_poses(times, poses, queries)
     np.testing.assert_allclose(result[0, :2], [1.0, 2.0])
     assert abs(se2.wrap_angle(result[0, 2] - np.pi)) < 1e-12  # through +-pi, not through 0
-    np.testing.assert_allclose(result[1], poses[0])  # 0.4 s early: clamped
-    np.testing.assert_allclose(result[2], poses[1])  # 0.4 s late: clamped
-    assert np.all(np.isnan(result[3]))  # 0.6 s late: unknown
+    assert np.all(np.isnan(result[1:3]))  # just before or past the span: unknown, not held
+    np.testing.assert_allclose(result[3], poses[1])  # at the end: exact
+
+
+def test_interpolation_leaves_an_outage_without_poses() -> None:
+    """Samples every 0.1 s with 1 s missing: queries inside the outage have no pose, however
+    near its edges; those before and after it are interpolated."""
+    times = np.concatenate([np.arange(0, 5), np.arange(15, 20)]) * 100_000_000
+    poses = np.column_stack([times / 1e8, np.zeros(10), np.zeros(10)])
+    queries = np.array([350_000_000, 410_000_000, 1_000_000_000, 1_550_000_000], dtype=np.int64)
+    result = interpolate_poses(times, poses, queries, max_gap_ns=gt_max_gap_ns(times))
+    assert np.isfinite(interpolate_poses(times, poses, queries)).all()  # no limit asked
+    np.testing.assert_allclose(result[[0, 3], 0], [3.5, 15.5])
+    assert np.all(np.isnan(result[1:3]))
 
 
 def test_scans_outside_gt_are_nan_with_warning(

@@ -117,10 +117,10 @@ def test_unknown_tags_are_skipped_with_one_warning(caplog: pytest.LogCaptureFixt
         record = parse_g2o(text, "mixed.g2o")
     assert list(record.vertices) == [0]
     messages = [r.getMessage() for r in caplog.records]
-    assert len(messages) == 2
-    assert (
-        "mixed.g2o: skipped 2 line(s) with unsupported tag VERTEX_XY (first at line 2)" in messages
-    )
+    assert messages == [
+        "mixed.g2o: skipped 3 line(s) with unsupported tags VERTEX_XY (2), EDGE_SE2_XY (1) "
+        "(first at line 2)"
+    ]
 
 
 MALFORMED = {

@@ -122,7 +122,7 @@ def test_synthetic_family_generates_reuses_and_repairs(tmp_path: Path) -> None:
 def test_unknown_scenario_is_a_clear_error(tmp_path: Path) -> None:
     from radar_slam.errors import DatasetNotFoundError
 
-    with pytest.raises(DatasetNotFoundError, match="known"):
+    with pytest.raises(DatasetNotFoundError, match="no such scenario.*simulate --help"):
         open_sequence("synthetic/nope", tmp_path)
 
 

@@ -19,6 +19,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from radar_slam.batch.tasks import BatchRow
+from radar_slam.plots import TRAJECTORY_COLOURS
 
 SUMMARY_COLUMNS = tuple(f.name for f in fields(BatchRow))
 CSV_FILE = "summary.csv"
@@ -80,8 +81,14 @@ def plot_summary(path: Path, rows: Sequence[BatchRow]) -> None:
     figure = Figure(figsize=(PLOT_WIDTH_IN, 1.5 + ROW_HEIGHT_IN * len(rows)), dpi=DPI)
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
-    axes.barh(y - BAR_HEIGHT / 2, odometry, BAR_HEIGHT, label="odometry", color="tab:orange")
-    axes.barh(y + BAR_HEIGHT / 2, slam, BAR_HEIGHT, label="SLAM", color="tab:blue")
+    axes.barh(
+        y - BAR_HEIGHT / 2,
+        odometry,
+        BAR_HEIGHT,
+        label="odometry",
+        color=TRAJECTORY_COLOURS["odometry"],
+    )
+    axes.barh(y + BAR_HEIGHT / 2, slam, BAR_HEIGHT, label="SLAM", color=TRAJECTORY_COLOURS["slam"])
     for n, row in enumerate(rows):
         if not np.isfinite(slam[n]):
             note = "failed" if not row.ok else "no ground truth"

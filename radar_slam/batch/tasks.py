@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import shutil
+import socket
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -25,12 +26,15 @@ from radar_slam.batch.grid import GridPoint
 from radar_slam.errors import RadarSlamError
 from radar_slam.outputs import write_results
 from radar_slam.pipeline import Pipeline, open_configured
+from radar_slam.signals import children_ignore_sigint
 
 log = logging.getLogger(__name__)
 
 PARTIAL_PREFIX = ".partial-"
 """A job writes into `<parent>/.partial-<name>` and renames it to `<parent>/<name>` when done."""
 SCHEDULER_CONNECT_TIMEOUT_S = 10.0
+SCHEDULER_PROBE_TIMEOUT_S = 5.0
+"""How long the check before any work waits for the scheduler's port to answer [s]."""
 MALLOC_TRIM_SETTING = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 """Dask's nanny sets glibc's MALLOC_TRIM_THRESHOLD_ in its workers by default, which also turns
 off glibc's adaptive mmap threshold: every large numpy array is then mmap'ed and page-faulted
@@ -148,12 +152,21 @@ ProgressHook = Callable[[BatchRow, int, int], None]
 
 
 def check_scheduler(address: str) -> None:
-    """Reject an address that is not `scheme://host:port` before anything starts."""
+    """Reject an address that is not `scheme://host:port`, or a tcp:// one where nothing
+    listens, before anything starts."""
     scheme, separator, rest = address.partition("://")
     if not separator or not scheme or not rest:
         raise RadarSlamError(
             f"--scheduler {address!r}: expected a scheduler address such as tcp://host:8786"
         )
+    host, _, port = rest.rpartition(":")
+    if scheme != "tcp" or not port.isdigit():
+        return  # other transports: Dask's own connection attempt tells
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), SCHEDULER_PROBE_TIMEOUT_S).close()
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise RadarSlamError(f"--scheduler {address}: cannot connect ({reason})") from None
 
 
 def run_batch(
@@ -176,8 +189,8 @@ def run_batch(
     import dask  # heavy; only batch needs it
     from distributed import Client, LocalCluster, as_completed
 
-    if scheduler is None:
-        with dask.config.set({MALLOC_TRIM_SETTING: None}):
+    if scheduler is None:  # workers deaf to Ctrl-C: this process ends them, without tracebacks
+        with dask.config.set({MALLOC_TRIM_SETTING: None}), children_ignore_sigint():
             cluster = LocalCluster(
                 n_workers=workers,
                 threads_per_worker=1,

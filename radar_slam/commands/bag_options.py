@@ -4,13 +4,10 @@ config.yaml of a result folder records them."""
 
 from __future__ import annotations
 
-import dataclasses
-from pathlib import Path
-from typing import TypeVar
+from typing import Any
 
 import typer
 
-from radar_slam.datasets import DatasetConfig, Sequence, open_sequence
 from radar_slam.datasets.rosbag import LAYOUT_PRESETS
 
 TOPIC_OPTION = typer.Option(
@@ -34,38 +31,13 @@ LAYOUT_OPTION = typer.Option(
     "--config.",
 )
 
-ConfigT = TypeVar("ConfigT")
 
-
-def with_bag_options(
-    config: ConfigT, topic: str | None, gt_topic: str | None, layout: str | None
-) -> ConfigT:
-    """`config` (a config with a `dataset: DatasetConfig` section) with the given bag options."""
-    if topic is None and gt_topic is None and layout is None:
-        return config
-    dataset: DatasetConfig = config.dataset  # type: ignore[attr-defined]
-    dataset = dataclasses.replace(
-        dataset,
-        topic=topic or dataset.topic,
-        gt_topic=gt_topic or dataset.gt_topic,
-        layout=layout or dataset.layout,
-    )
-    return dataclasses.replace(config, dataset=dataset)  # type: ignore[type-var]
-
-
-def reopen_with_bag_options(
-    spec: str,
-    data_root: Path | None,
-    sequence: Sequence,
-    config: ConfigT,
-    topic: str | None,
-    gt_topic: str | None,
-    layout: str | None,
-) -> tuple[Sequence, ConfigT]:
-    """(sequence, config) with the bag options applied; the sequence is reopened when any is
-    given (a non-bag sequence then fails with a ConfigError naming the option)."""
-    updated = with_bag_options(config, topic, gt_topic, layout)
-    if updated is config:
-        return sequence, config
-    dataset: DatasetConfig = updated.dataset  # type: ignore[attr-defined]
-    return open_sequence(spec, data_root, dataset), updated
+def bag_overrides(
+    topic: str | None, gt_topic: str | None, layout: str | None
+) -> dict[str, Any] | None:
+    """Config overrides (`dataset:` keys) of the given bag options, for `open_configured`
+    (applied on top of the config files; None when no option is given). A sequence that is no
+    bag then fails with a ConfigError naming the option."""
+    given = {"topic": topic, "gt_topic": gt_topic, "layout": layout}
+    dataset = {key: value for key, value in given.items() if value is not None}
+    return {"dataset": dataset} if dataset else None

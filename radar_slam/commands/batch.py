@@ -1,14 +1,18 @@
 """`radar-slam batch SEQ... [--grid FILE] [--scheduler ADDRESS] [--workers N]`: many runs on Dask.
 
 Everything is checked before any task is submitted (sequences found, grid and config valid, the
-output folder absent or empty and writable). Each (sequence, configuration) then runs as one Dask
-task into `<out>/<family>_<name>/<configuration>/` (the files of `radar-slam run`); a failed run
-is a row with its error. The batch folder gets summary.csv, summary.md and summary.png.
+output folder absent or empty and writable). Each (sequence, configuration) then runs as one
+Dask task into `<out>/<family>_<name>/<configuration>/` (the files of `radar-slam run`); a failed
+run is a row with its error. The batch folder gets summary.csv, summary.md and summary.png. It
+is written under a hidden temporary name and renamed when complete, so an interrupted batch
+leaves nothing behind.
 """
 
 from __future__ import annotations
 
 import logging
+import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import typer
@@ -25,24 +29,22 @@ from radar_slam.batch import (
     write_summary,
 )
 from radar_slam.commands.options import DATA_ROOT_OPTION
-from radar_slam.errors import RadarSlamError, ResultsError
-from radar_slam.results import check_out_folder, result_dir
+from radar_slam.errors import RadarSlamError
+from radar_slam.results import check_result_location, final_of_staging, write_result_dir
 
 BATCH_FAMILY = "batch"
-PROBE_FILE = ".radar-slam-write-probe"
+DASK_LOGGERS = ("distributed", "tornado", "bokeh", "asyncio")
+"""Logger families of Dask and what it runs on, quiet below ERROR unless -v."""
 
 
-def writable_out(out: Path | None, grid: Path | None) -> Path:
-    """The batch folder (`--out`, absent or empty; default results/batch_<grid>/<timestamp>/),
-    created and checked writable."""
-    folder = result_dir(BATCH_FAMILY, "default" if grid is None else grid.stem, out)
-    probe = folder / PROBE_FILE
-    try:
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise ResultsError(f"{folder}: output folder not writable ({exc.strerror})") from None
-    return folder
+def quiet_dask_logging() -> None:
+    """Dask's INFO chatter off (its import sets its loggers' levels, so this comes after it)."""
+    import distributed  # noqa: F401  (heavy; only batch needs it)
+
+    for name in list(logging.root.manager.loggerDict):
+        if name.split(".")[0] in DASK_LOGGERS:
+            logging.getLogger(name).setLevel(logging.ERROR)
+    warnings.filterwarnings("ignore", category=UserWarning, module="distributed")
 
 
 def batch_command(
@@ -84,23 +86,36 @@ def batch_command(
     if config is not None and not config.is_file():
         raise RadarSlamError(f"{config}: config file not found")
     points = read_grid(grid)
-    if out is not None:
-        check_out_folder(out)
+    name = "default" if grid is None else grid.stem
+    check_result_location(BATCH_FAMILY, name, out)
     planned = plan_jobs(sequences, points, config, data_root, max_frames)
-    folder = writable_out(out, grid)
-    jobs = place_jobs(planned, folder)
-    if not logging.getLogger().isEnabledFor(logging.INFO):  # without -v: Dask's own chatter off
-        logging.getLogger("distributed").setLevel(logging.ERROR)
+    if not logging.getLogger().isEnabledFor(logging.INFO):  # without -v
+        quiet_dask_logging()
     where = scheduler or f"a local cluster of {workers} workers"
-    typer.echo(f"{len(jobs)} runs ({len(sequences)} sequences x {len(points)} configs) on {where}")
-    with tqdm(total=len(jobs), desc="batch", unit="run", dynamic_ncols=True) as bar:
+    typer.echo(
+        f"{len(planned)} runs ({len(sequences)} sequences x {len(points)} configs) on {where}"
+    )
+    rows: list[BatchRow] = []
 
-        def on_done(row: BatchRow, done: int, total: int) -> None:
-            bar.update(done - bar.n)
-            bar.set_postfix_str(f"{row.sequence} [{row.config}] {row.status}", refresh=True)
+    def write(staging: Path) -> None:
+        jobs = place_jobs(planned, staging)
+        with tqdm(total=len(jobs), desc="batch", unit="run", dynamic_ncols=True) as bar:
 
-        rows = run_batch(jobs, scheduler, workers, on_done)
-    write_summary(folder, rows)
+            def on_done(row: BatchRow, done: int, total: int) -> None:
+                bar.update(done - bar.n)
+                bar.set_postfix_str(f"{row.sequence} [{row.config}] {row.status}", refresh=True)
+
+            done = run_batch(jobs, scheduler, workers, on_done)
+        final = final_of_staging(staging.absolute())
+        rows.extend(
+            row if not row.folder else replace(row, folder=str(final / relative))
+            for row, relative in zip(done, (job.folder for job in planned), strict=True)
+        )
+        write_summary(staging, rows)
+
+    # the batch folder appears when complete: an interrupted batch, or one whose scheduler
+    # cannot be reached, leaves nothing that blocks its re-run
+    folder = write_result_dir(BATCH_FAMILY, name, write, out)
     typer.echo(markdown_text(rows), nl=False)
     typer.echo(f"summary in {folder} (summary.csv, summary.md, summary.png)")
     failed = sum(not row.ok for row in rows)

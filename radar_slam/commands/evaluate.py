@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from enum import Enum
 from pathlib import Path
@@ -23,6 +22,7 @@ from radar_slam.evaluation.time_offset import (
     estimate_time_offset,
     ground_truth_with_offset,
 )
+from radar_slam.outputs import json_text
 from radar_slam.results import check_output_file, write_text_atomically
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
 from raplace.units import NS_PER_MS
@@ -126,14 +126,14 @@ def eval_command(
     gt_offset_s: float | None = typer.Option(
         None,
         "--gt-offset",
-        help="A known GT clock offset [s] (GT minus estimate): add rows scored with it applied.",
+        help="A known GT clock offset \\[s] (GT minus estimate): add rows scored with it applied.",
     ),
     gt_accuracy_m: float = typer.Option(
         0.0,
         "--gt-accuracy",
         min=0.0,
         max=MAX_GT_ACCURACY_M,
-        help="Position accuracy of the GT [m]: drift then uses only segments long enough for "
+        help="Position accuracy of the GT \\[m]: drift then uses only segments long enough for "
         "it (2 for GNSS without RTK: 400-800 m).",
     ),
 ) -> None:
@@ -204,7 +204,7 @@ def eval_command(
             "matched poses; shown as n/a"
         )
     if json_path is not None:
-        write_text_atomically(json_path, json.dumps(metrics_json(results), indent=2) + "\n")
+        write_text_atomically(json_path, json_text(metrics_json(results)))
         typer.echo(f"wrote {json_path}")
 
 

@@ -2,8 +2,9 @@
 
 SEQ is anything `run` accepts (family/name, a folder, a bag), written as scans plus ground truth;
 or a result folder of `run` / `odometry` (holding odometry.tum), whose TUM trajectories are
-written as nav_msgs/Odometry and nav_msgs/Path. OUT ending in `.bag` is a ROS 1 bag, anything
-else a ROS 2 bag folder (`--storage mcap` or `sqlite3`). The layout is in `radar_slam.rosbag_out`.
+written as nav_msgs/Odometry and nav_msgs/Path. OUT ending in `.bag` is a ROS 1 bag (`.BAG` is
+refused), anything else a ROS 2 bag folder (`--storage mcap` or `sqlite3`). The layout is in
+`radar_slam.rosbag_out`. A killed export's hidden leftovers are removed by the next one.
 """
 
 from __future__ import annotations
@@ -17,12 +18,17 @@ from radar_slam.commands.bag_options import (
     GT_TOPIC_OPTION,
     LAYOUT_OPTION,
     TOPIC_OPTION,
-    reopen_with_bag_options,
+    bag_overrides,
 )
 from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.errors import ResultsError
 from radar_slam.pipeline import open_configured
-from radar_slam.rosbag_out import Storage, write_sequence_bag, write_trajectories_bag
+from radar_slam.rosbag_out import (
+    Storage,
+    check_bag_out,
+    write_sequence_bag,
+    write_trajectories_bag,
+)
 from radar_slam.trajectory import read_tum
 
 TRAJECTORY_FILES = ("odometry", "slam", "gt")
@@ -59,8 +65,7 @@ def export_command(
     if storage not in ("mcap", "sqlite3"):
         raise ResultsError(f"--storage {storage!r}: choose mcap or sqlite3")
     chosen: Storage = "mcap" if storage == "mcap" else "sqlite3"
-    if bag.exists() or bag.is_symlink():
-        raise ResultsError(f"{bag}: exists already; choose another --bag (never overwritten)")
+    check_bag_out(bag)
     folder = Path(sequence)
     if is_result_folder(folder):
         trajectories = {
@@ -71,10 +76,8 @@ def export_command(
         write_trajectories_bag(trajectories, bag, chosen)
         typer.echo(f"{', '.join(trajectories)} trajectories of {folder} -> {bag}")
         return
-    seq, settings = open_configured(sequence, data_root, config)
-    seq, settings = reopen_with_bag_options(
-        sequence, data_root, seq, settings, topic, gt_topic, layout
-    )
+    bag_options = bag_overrides(topic, gt_topic, layout)
+    seq, settings = open_configured(sequence, data_root, config, bag_options)
     total = len(seq) if max_frames is None else min(max_frames, len(seq))
     with tqdm(total=total, desc=f"{seq.family}/{seq.name}", unit="scan") as bar:
         written = write_sequence_bag(

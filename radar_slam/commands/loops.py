@@ -52,6 +52,11 @@ def loops_command(
         f"{len(run.loops)} verified loop proposals, {run.n_accepted} accepted; "
         f"{run.seconds:.1f} s"
     )
+    if run.input_loops:
+        typer.echo(
+            f"input loops: {run.input_loops}, {run.input_loops_left_out} left out as inconsistent "
+            "with the odometry (named in the warnings above)"
+        )
     typer.echo(f"wrote {out}")
 
 

@@ -7,7 +7,6 @@ exit code 1). `localize` writes a result folder (`--out`, or
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -23,8 +22,9 @@ from radar_slam.commands.options import (
 from radar_slam.config import write_yaml
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import Map
-from radar_slam.maps.localizer import Localization, Localizer
+from radar_slam.maps.localizer import Localization, Localizer, settings_for_map
 from radar_slam.maps.writers import localization_summary, map_info, write_localization
+from radar_slam.outputs import json_text
 from radar_slam.pipeline import frame_count, ground_truth_of, open_configured, sequence_label
 from radar_slam.results import check_output_root, check_result_location, write_result_dir
 
@@ -47,6 +47,7 @@ def localize_command(
     check_output_root(out)
     the_map = Map.load(map_path)
     seq, settings = open_configured(sequence, data_root, config)
+    settings = settings_for_map(settings, the_map)  # what runs, and so what config.yaml says
     check_result_location(seq.family, f"{seq.name}_localize", out)  # before the work
     total = frame_count(seq, max_frames)
     localizer = Localizer(the_map, settings)
@@ -77,7 +78,7 @@ def info_command(
     """Print a map's sessions, keyframes, extent, size and GT alignment."""
     info = map_info(map_path, Map.load(map_path))
     if as_json:
-        typer.echo(json.dumps(info, indent=2))
+        typer.echo(json_text(info), nl=False)
         return
     alignment = info["gt_alignment"]
     lines = [f"map           {map_path}"]

@@ -16,7 +16,7 @@ from radar_slam.commands.bag_options import (
     GT_TOPIC_OPTION,
     LAYOUT_OPTION,
     TOPIC_OPTION,
-    reopen_with_bag_options,
+    bag_overrides,
 )
 from radar_slam.commands.options import (
     CONFIG_OPTION,
@@ -44,7 +44,7 @@ from radar_slam.pipeline import (
     run_odometry,
 )
 from radar_slam.results import check_output_root, check_result_location, write_result_dir
-from radar_slam.viewer import RerunViewer, import_rerun
+from radar_slam.viewer import SPAWN, RerunViewer, check_viewer_target, import_rerun
 
 MAP_FOLDER = "map"
 """The map every SLAM run writes into its result folder (`radar_slam.maps`)."""
@@ -94,23 +94,27 @@ def run_command(
 ) -> None:
     """Radar SLAM: odometry, verified RaPlace loop closures, GTSAM pose graph; writes results."""
     check_output_root(out)
-    if viewer is not None:  # fail before any work when rerun-sdk is missing
+    if viewer is not None:  # fail before any work: rerun-sdk missing, no display, bad file
         import_rerun()
+        check_viewer_target(viewer)
     prior_map = None if map_path is None else Map.load(map_path)
-    seq, settings = open_configured(sequence, data_root, config)
-    seq, settings = reopen_with_bag_options(
-        sequence, data_root, seq, settings, topic, gt_topic, layout
-    )
+    bag_options = bag_overrides(topic, gt_topic, layout)
+    seq, settings = open_configured(sequence, data_root, config, bag_options)
     seq = strided(seq, stride)
     check_result_location(seq.family, seq.name, out)  # before the run, not after it
     if no_loops:
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
     observer = None if viewer is None else RerunViewer(viewer, f"{seq.family}/{seq.name}")
-    with progress_bar(total, f"{seq.family}/{seq.name}") as update:
-        results = Pipeline(
-            seq, settings, max_frames=max_frames, progress=update, observer=observer
-        ).run()
+    try:
+        with progress_bar(total, f"{seq.family}/{seq.name}") as update:
+            results = Pipeline(
+                seq, settings, max_frames=max_frames, progress=update, observer=observer
+            ).run()
+    except BaseException:
+        if observer is not None:
+            observer.abandon()
+        raise
     joined = None if prior_map is None else join_session(results, seq, prior_map)
     results = results if joined is None else joined.results  # in the map's frame
     joined_text: list[str] = []
@@ -126,6 +130,8 @@ def run_command(
     typer.echo(slam_summary(results), nl=False)
     typer.echo("".join(joined_text), nl=False)  # run --map
     typer.echo(f"results in {folder}")
+    if viewer is not None and viewer != SPAWN:
+        typer.echo(f"viewer recording in {viewer}")
 
 
 def odometry_command(
@@ -142,10 +148,8 @@ def odometry_command(
     """Phase-correlation radar odometry only; writes odometry.tum/.kitti and, with ground truth,
     metrics.json (ATE, KITTI drift) and trajectory.png."""
     check_output_root(out)
-    seq, settings = open_configured(sequence, data_root, config)
-    seq, settings = reopen_with_bag_options(
-        sequence, data_root, seq, settings, topic, gt_topic, layout
-    )
+    bag_options = bag_overrides(topic, gt_topic, layout)
+    seq, settings = open_configured(sequence, data_root, config, bag_options)
     seq = strided(seq, stride)
     check_result_location(seq.family, seq.name, out)
     total = frame_count(seq, max_frames)

@@ -48,7 +48,7 @@ from radar_slam.datasets._io import (
     read_numeric_table,
 )
 from radar_slam.datasets.frame import GroundTruthSource, RadarFrame
-from radar_slam.datasets.mulran import interpolate_poses
+from radar_slam.datasets.mulran import gt_max_gap_ns, interpolate_poses
 from radar_slam.datasets.navtech import OXFORD_HEADER_BYTES
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
@@ -216,16 +216,23 @@ class BoreasSequence:
     def ground_truth(self) -> NDArray[np.float64] | None:
         """(N, 3) T_enu_radar (easting, northing, heading) at each scan time; None without GT.
 
-        Rows are NaN for scans more than 0.5 s outside the time span of `radar_poses.csv`.
+        Rows are NaN for scans outside the time span of `radar_poses.csv` or inside an outage of
+        it (`interpolate_poses`).
         """
         if self.gt_path is None:
             return None
         times, poses = read_radar_poses(self.gt_path)
-        result = interpolate_poses(times, poses, self._times_ns + self.gt_time_offset_ns)
+        result = interpolate_poses(
+            times,
+            poses,
+            self._times_ns + self.gt_time_offset_ns,
+            max_gap_ns=gt_max_gap_ns(times),
+        )
         missing = int(np.isnan(result[:, 0]).sum())
         if missing:
             logger.warning(
-                "%s: %d of %d scans lie outside its time span; their ground truth is NaN",
+                "%s: %d of %d scans lie outside its time span or in an outage of it; their ground "
+                "truth is NaN",
                 self.gt_path,
                 missing,
                 len(self),

@@ -19,9 +19,9 @@ period is the gap to the previous radar stamp, or 250 ms when that gap is implau
 Ground truth: `global_pose.csv` holds the vehicle BASE pose in MulRan's UTM-like world frame. It
 is interpolated to each scan time (x, y linearly; yaw linearly after unwrapping) and the radar
 mounting `MULRAN_T_BASE_RADAR` is applied: T_world_radar = T_world_base * T_base_radar. A scan
-at most one GT sample period (the median gap of global_pose.csv) outside the GT time span takes
-the nearest end pose; scans further out have no ground truth (NaN poses, one logged warning):
-ground truth is never stretched over a part of the drive it does not cover.
+outside the GT time span, or between two GT samples more than two GT sample periods apart (the
+median gap of global_pose.csv, at most 0.5 s), has no ground truth (NaN pose, counted in one
+logged warning): ground truth is never held at its end nor stretched over an outage.
 """
 
 from __future__ import annotations
@@ -85,7 +85,10 @@ MULRAN_GT_DESCRIPTION = "MulRan global_pose.csv: GPS/INS and fibre-optic gyro fu
 MULRAN_GT_ACCURACY_M = 0.1
 """Stated accuracy of MulRan's fused GT positions [m] (decimetre level)."""
 GT_CLAMP_NS = 500_000_000
-"""Upper bound of the tolerance outside the GT time span (one GT sample period, at most this)."""
+"""Upper bound of the GT tolerance (one GT sample period, at most this)."""
+OUTAGE_PERIODS = 2
+"""Two GT samples more than this many tolerances apart enclose an outage: scans between them
+have no GT (a single dropped sample or jitter is still interpolated over)."""
 
 MULRAN_LAYOUT = (
     "<root>/mulran/<SEQ>/sensor_data/radar/polar/<t_ns>.png (also <SEQ>/radar/polar/, "
@@ -154,25 +157,28 @@ def interpolate_poses(
     poses: NDArray[np.float64],
     query_ns: NDArray[np.int64],
     clamp_ns: int | None = None,
+    max_gap_ns: int | None = None,
 ) -> NDArray[np.float64]:
-    """Interpolate SE(2) poses to query times.
+    """Interpolate SE(2) poses to query times; NaN rows where the poses do not tell.
 
     x and y are linear in time; yaw is linear after unwrapping (so it turns the short way through
-    +-pi). Queries up to `clamp_ns` outside [times[0], times[-1]] take the end pose; further out
-    the row is NaN.
+    +-pi). A query outside [times[0], times[-1]] has no pose (its row is NaN): the end pose is
+    never held and nothing is extrapolated. With `max_gap_ns`, a query between two samples more
+    than that apart lies in an outage of the poses and has none either.
 
     Args:
         times_ns: (N,) strictly increasing pose times [ns].
         poses: (N, 3) poses (x, y, yaw).
         query_ns: (M,) times to interpolate at [ns].
-        clamp_ns: how far outside the span a query may still be clamped [ns]; default one
-            sample period (the median gap of `times_ns`), at most `GT_CLAMP_NS`.
+        clamp_ns: kept for callers of the former end-pose tolerance; outside the span there is
+            never a pose, whatever its value.
+        max_gap_ns: the longest gap between two samples that is interpolated over [ns] (e.g.
+            `gt_max_gap_ns(times_ns)`, the family's tolerance); None interpolates over any gap.
 
     Returns:
-        (M, 3) interpolated poses, yaw wrapped to [-pi, pi).
+        (M, 3) interpolated poses, yaw wrapped to [-pi, pi); NaN rows as above.
     """
-    if clamp_ns is None:
-        clamp_ns = gt_tolerance_ns(times_ns)
+    del clamp_ns  # the end pose is never held
     origin = times_ns[0]
     t = (times_ns - origin).astype(np.float64)
     q = (query_ns - origin).astype(np.float64)
@@ -182,17 +188,37 @@ def interpolate_poses(
         axis=-1,
     )
     result[:, 2] = se2.wrap_angle(result[:, 2])
-    outside = (query_ns < times_ns[0] - clamp_ns) | (query_ns > times_ns[-1] + clamp_ns)
-    result[outside] = np.nan
+    result[~gt_covers(times_ns, query_ns, max_gap_ns)] = np.nan
     return result
 
 
+def gt_covers(
+    times_ns: NDArray[np.int64], query_ns: NDArray[np.int64], max_gap_ns: int | None = None
+) -> NDArray[np.bool_]:
+    """(M,) True where a query can be interpolated: inside the span of `times_ns`, at a sample
+    time or between two samples at most `max_gap_ns` apart (None: any)."""
+    query_ns = np.asarray(query_ns, dtype=np.int64)
+    inside = (query_ns >= times_ns[0]) & (query_ns <= times_ns[-1])
+    if max_gap_ns is None:
+        return inside
+    after = np.clip(np.searchsorted(times_ns, query_ns, side="left"), 0, len(times_ns) - 1)
+    before = np.clip(after - 1, 0, len(times_ns) - 1)
+    at_sample = times_ns[after] == query_ns
+    short_gap = times_ns[after] - times_ns[before] <= max_gap_ns
+    return inside & (at_sample | short_gap)
+
+
 def gt_tolerance_ns(times_ns: NDArray[np.int64]) -> int:
-    """How far outside the GT time span a scan still takes the end pose: one GT sample period
-    (the median gap), at most `GT_CLAMP_NS` [ns]."""
+    """The GT tolerance: one GT sample period (the median gap), at most `GT_CLAMP_NS` [ns]."""
     if len(times_ns) < 2:
         return 0
     return int(min(GT_CLAMP_NS, np.median(np.diff(times_ns))))
+
+
+def gt_max_gap_ns(times_ns: NDArray[np.int64]) -> int:
+    """The longest GT gap interpolated over: `OUTAGE_PERIODS` tolerances [ns]; a longer one is
+    an outage (a single dropped sample or jitter is not)."""
+    return OUTAGE_PERIODS * gt_tolerance_ns(times_ns)
 
 
 def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDArray[np.float64]:
@@ -200,12 +226,14 @@ def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDAr
     outside GT)."""
     times, base_poses = read_global_pose(gt_path)
     tolerance_ns = gt_tolerance_ns(times)
-    base_at_scans = interpolate_poses(times, base_poses, scan_stamps_ns, tolerance_ns)
+    base_at_scans = interpolate_poses(
+        times, base_poses, scan_stamps_ns, max_gap_ns=gt_max_gap_ns(times)
+    )
     missing = int(np.isnan(base_at_scans[:, 0]).sum())
     if missing:
         logger.warning(
-            "%s: %d of %d scans lie more than %.3f s (one GT period) outside its time span; "
-            "they have no ground truth",
+            "%s: %d of %d scans lie outside its time span or in an outage (samples more than "
+            "2 x %.3f s apart); they have no ground truth",
             gt_path,
             missing,
             len(scan_stamps_ns),
@@ -344,8 +372,8 @@ class MulRanSequence:
     def ground_truth(self) -> NDArray[np.float64] | None:
         """(N, 3) T_world_radar (x, y, yaw) at each scan time, MulRan world frame; None without GT.
 
-        Read and interpolated on first access. Rows are NaN for scans more than one GT sample
-        period outside the GT time span.
+        Read and interpolated on first access. Rows are NaN for scans outside the GT time span
+        or in an outage of it (`interpolate_poses`).
         """
         if self.gt_path is None:
             return None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import os
 from pathlib import Path
 
@@ -77,7 +78,6 @@ def open_sequence(
     """
     root = registry.data_root(data_root)
     loader_options = (options or DatasetConfig()).loader_options()
-    looked_in: list[Path] = []
     candidates: list[Family] = list(families().values())
     named = _split_family_spec(spec) if isinstance(spec, str) else None
     if named is not None:
@@ -86,7 +86,6 @@ def open_sequence(
         folder = sequence_folder(root, family, sequence)
         if folder.is_dir() or (folder.is_file() and family.detect(folder)):  # file: a ROS 1 bag
             return _open_with(family, folder, loader_options)
-        looked_in.append(folder.absolute())
     path = Path(spec).expanduser()
     if path.is_dir() or path.is_file():  # a file: a recording such as a ROS 1 bag
         detected = detect_family(path)
@@ -96,7 +95,6 @@ def open_sequence(
             f"{path} exists but matches no known dataset layout; expected one of: "
             f"{_layouts_and_sources(candidates)}"
         )
-    looked_in.append(path.absolute())
     if isinstance(spec, str) and SPEC_SEPARATOR not in spec.strip(SPEC_SEPARATOR):
         for family in candidates:
             if family.resolve is not None:
@@ -104,10 +102,49 @@ def open_sequence(
             folder = family_folder(root, family.name) / spec.strip(SPEC_SEPARATOR)
             if folder.is_dir() and family.detect(folder):
                 return _open_with(family, folder, loader_options)
-            looked_in.append(folder.absolute())
-    places = ", ".join(str(place) for place in dict.fromkeys(looked_in))
-    known = ", ".join(sorted(families())) or "none registered"
-    raise DatasetNotFoundError(  # one line, however long
-        f"sequence {str(spec)!r} not found (data root {root}; families: {known}); looked in "
-        f"{places}; {_layouts_and_sources(candidates)}"
-    )
+    family_named = None if named is None else named[0]
+    raise DatasetNotFoundError(_not_found(str(spec), root, family_named))
+
+
+MAX_SUGGESTIONS = 3
+SUGGESTION_CUTOFF = 0.5
+"""`difflib` similarity above which a sequence name under the data root is suggested."""
+
+
+def closest(word: str, names: list[str]) -> list[str]:
+    """The few `names` most like `word` (a mistyped name), best first; maybe none."""
+    return difflib.get_close_matches(word, names, MAX_SUGGESTIONS, SUGGESTION_CUTOFF)
+
+
+def _names_under(root: Path) -> list[str]:
+    """`family/name` of every folder or file in a family folder under `root` (nothing opened)."""
+    names = []
+    for family in families().values():
+        folder = family_folder(root, family.name)
+        if folder.is_dir():
+            names += [f"{family.name}/{entry.name}" for entry in sorted(folder.iterdir())]
+    return names
+
+
+def _not_found(spec: str, root: Path, family: Family | None) -> str:
+    """One short line: what was not found where, the closest names there, how to list them,
+    and for a named family its layout and where to obtain it."""
+    names = _names_under(root) if root.is_dir() else []
+    pool = {name: name for name in names}
+    if family is None:  # a bare name: compare with the names without their family
+        pool.update({name.split("/", 1)[1]: name for name in names})
+    close = closest(spec, list(pool))
+    if "/" in spec and family is None:
+        known = ", ".join(sorted(families()))
+        text = f"sequence {spec!r}: unknown family {spec.split('/')[0]!r} (families: {known})"
+    elif family is not None:
+        folder = sequence_folder(root, family, spec.split("/", 1)[1])
+        text = f"sequence {spec!r} not found: no folder {folder.absolute()}"
+    else:
+        text = f"sequence {spec!r} not found under the data root {root}"
+    if close:
+        text += f" (closest: {', '.join(dict.fromkeys(pool[c] for c in close))})"
+    text += "; `radar-slam list` shows what is there"
+    if family is not None:
+        text += f"; {_layouts_and_sources([family])}"
+    return text

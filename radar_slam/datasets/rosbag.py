@@ -17,7 +17,7 @@ Bags written by `radar-slam export` carry a `std_msgs/String` topic `/radar_slam
 (JSON: layout, range resolution, sensor, scan and GT topics), so they need no options. Ground
 truth comes from a `nav_msgs/Odometry` or `geometry_msgs/PoseStamped` topic (`gt_topic`): its
 (x, y, yaw) poses, taken as radar poses in their world frame, are interpolated to the scan times
-(exact at equal stamps; NaN more than 0.5 s outside their span).
+(exact at equal stamps; NaN outside their span or in an outage of it).
 
 Frames load lazily: opening indexes the scan messages (one pass reading their headers) and each
 `__getitem__` seeks to one message.
@@ -40,7 +40,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from radar_slam.datasets._io import decode_oxford_form, frame_index
 from radar_slam.datasets.frame import GroundTruthSource, RadarFrame
-from radar_slam.datasets.mulran import interpolate_poses
+from radar_slam.datasets.mulran import gt_max_gap_ns, interpolate_poses
 from radar_slam.datasets.navtech import (
     ENCODER_TICKS_PER_REV,
     MULRAN_FIRST_ENCODER,
@@ -224,6 +224,7 @@ class BagSequence:
         self.name: str = self.path.stem if self.path.is_file() else self.path.name
         self._reader = self._open()
         info = self._scan_info()
+        self._check_scan_info(info, layout, range_resolution_m)
         base = LAYOUT_PRESETS.get(str(info.get("layout"))) if info else None
         if base is not None and "range_resolution_m" in info:
             base = replace(base, range_resolution_m=float(info["range_resolution_m"]))
@@ -261,6 +262,25 @@ class BagSequence:
             return info if isinstance(info, dict) else {}
         return {}
 
+    def _check_scan_info(
+        self, info: dict[str, Any], layout: str | None, range_resolution_m: float | None
+    ) -> None:
+        """A layout option that contradicts the bag's own scan info is refused (the bag says
+        what it is; a wrong option would silently give a wrong trajectory)."""
+        stated = info.get("layout")
+        if layout is not None and stated is not None and layout != stated:
+            raise ConfigError(
+                f"{self.path}: --layout (dataset.layout) {layout!r} contradicts the bag's "
+                f"{SCAN_INFO_TOPIC}, which says layout {stated!r}; leave the option out"
+            )
+        stated_m = info.get("range_resolution_m")
+        if range_resolution_m is not None and stated_m is not None:
+            if not np.isclose(float(stated_m), range_resolution_m, rtol=1e-9, atol=0.0):
+                raise ConfigError(
+                    f"{self.path}: dataset.range_resolution_m {range_resolution_m} contradicts "
+                    f"the bag's {SCAN_INFO_TOPIC}, which says {stated_m}; leave the key out"
+                )
+
     def _topic_connections(self, topic: str, types: tuple[str, ...]) -> list[Connection]:
         connections = [c for c in self._reader.connections if c.topic == topic]
         if not connections:
@@ -276,30 +296,50 @@ class BagSequence:
     def _default_topic(self) -> str:
         """The only image topic whose first message is mono8 / 8UC1."""
         candidates = []
+        described = []
         connections = self._reader.connections
         image_topics = sorted({c.topic for c in connections if c.msgtype == IMAGE_TYPE})
         for topic in image_topics:
             chosen = [c for c in connections if c.topic == topic]
+            encoding = "no messages"
             for connection, _, raw in self._reader.messages(connections=chosen):
-                message = self._decode(raw, connection.msgtype)
-                if message.encoding in MONO_ENCODINGS:
+                encoding = str(self._decode(raw, connection.msgtype).encoding)
+                if encoding in MONO_ENCODINGS:
                     candidates.append(topic)
                 break
-        if len(candidates) != 1:
-            found = ", ".join(candidates) if candidates else "none"
-            raise DatasetFormatError(
-                f"{self.path}: {len(candidates)} mono8 image topics ({found}); choose one with "
-                "--topic (or dataset.topic)"
+            described.append(f"{topic} ({encoding})")
+        if len(candidates) == 1:
+            return candidates[0]
+        if candidates:
+            found = f"{len(candidates)} mono8 image topics ({', '.join(candidates)})"
+        else:
+            others = sorted({f"{c.topic} ({c.msgtype})" for c in connections})
+            others = [o for o in others if o.split(" ")[0] not in image_topics]
+            found = "no mono8 image topic with messages; image topics: " + (
+                ", ".join(described) or "none"
             )
-        return candidates[0]
+            found += f"; other topics: {', '.join(others) or 'none'}"
+        raise DatasetFormatError(
+            f"{self.path}: {found}; choose the scan topic with --topic (or dataset.topic)"
+        )
 
     def _index_scans(self) -> None:
         """One pass over the scan topic: header stamps and where each message is."""
         stamps: list[int] = []
         places: list[tuple[int, int]] = []  # (bag time, rank among messages at that bag time)
         previous, rank = -1, 0
+        shape: tuple[int, int] | None = None
         for connection, bag_time, raw in self._reader.messages(connections=self._connections):
             message = self._decode(raw, connection.msgtype)
+            size = (int(message.height), int(message.width))
+            shape = shape or size
+            if size != shape:
+                raise DatasetFormatError(
+                    f"{self.path}: {self.topic} message {len(stamps)} (stamp "
+                    f"{stamp_ns(message.header)} ns) is a {size[0]} x {size[1]} image, the "
+                    f"messages before it {shape[0]} x {shape[1]}: the image geometry changes "
+                    "mid-bag"
+                )
             rank = rank + 1 if bag_time == previous else 0
             previous = bag_time
             stamps.append(stamp_ns(message.header))
@@ -381,7 +421,10 @@ class BagSequence:
         stamps = np.array(times, dtype=np.int64)[order]
         keep = np.concatenate([[True], np.diff(stamps) > 0])
         return interpolate_poses(
-            stamps[keep], np.array(poses)[order][keep], self._times_ns + self.gt_time_offset_ns
+            stamps[keep],
+            np.array(poses)[order][keep],
+            self._times_ns + self.gt_time_offset_ns,
+            max_gap_ns=gt_max_gap_ns(stamps[keep]),
         )
 
     @property

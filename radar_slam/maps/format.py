@@ -11,7 +11,8 @@
 Everything written is a pure function of the `Map` (JSON with sorted keys and exact float
 text, `.npy` without timestamps, deterministic PNG), so save -> load -> save is byte-identical.
 Loading checks the format name, the version and every checksum before parsing anything, and
-raises `MapError` with one line naming the folder and the file. No GTSAM here.
+raises `MapError` with one line naming the folder and the file; then the content is checked
+(finite poses, edges between existing keyframes, settings in range). No GTSAM here.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
+from radar_slam.maps.validate import map_content_problem
+from radar_slam.results import PARTIAL_SUFFIX, remove_stale_partials
 
 FORMAT_NAME = "radar-slam-map"
 FORMAT_VERSION = 1
@@ -210,7 +213,8 @@ def write_map(path: Path, m: Map) -> None:
         raise MapError(f"{path}: exists already; a map is written into a new folder")
     if len(m.descriptors) != len(m) or len(m.images) != len(m):
         raise MapError(f"{path}: keyframes, descriptors and images differ in number")
-    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    remove_stale_partials(path.parent, path.name)  # what a killed writer of it left
+    partial = path.with_name(f".{path.name}{PARTIAL_SUFFIX}{os.getpid()}")
     try:
         partial.mkdir(parents=True)
         for name, data in encode_map(m).items():
@@ -289,7 +293,8 @@ def _sessions(path: Path, meta: dict[str, Any]) -> tuple[Session, ...]:
 
 
 def read_map(path: Path) -> Map:
-    """Read a map folder written by `write_map`, verifying version and checksums first.
+    """Read a map folder written by `write_map`, verifying version and checksums first, then
+    the content (`radar_slam.maps.validate`).
 
     Raises:
         MapError: missing, foreign, damaged or inconsistent folder (one line naming the file).
@@ -312,7 +317,7 @@ def read_map(path: Path) -> Map:
         for o, n in zip(keyframes["image_offset"], keyframes["image_bytes"], strict=True)
     )
     alignment = meta.get("gt_alignment")
-    return Map(
+    loaded = Map(
         keyframes=keyframes,
         descriptors=descriptors,
         images=images,
@@ -321,6 +326,10 @@ def read_map(path: Path) -> Map:
         settings=dict(meta.get("settings", {})),
         gt_alignment=None if alignment is None else np.asarray(alignment, dtype=np.float64),
     )
+    problem = map_content_problem(loaded, len(EDGE_KINDS))
+    if problem is not None:
+        raise MapError(f"{path}: {problem}")
+    return loaded
 
 
 def map_bytes(path: Path) -> int:

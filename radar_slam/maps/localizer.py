@@ -141,6 +141,28 @@ def descriptor_config_of(m: Map, fallback: DescriptorConfig) -> DescriptorConfig
         raise MapError(str(exc)) from None
 
 
+def settings_for_map(config: PipelineConfig, m: Map) -> PipelineConfig:
+    """`config` with the descriptor settings the map was made with, which every query of it
+    uses: the settings that actually run (to record), with a warning when the config asked for
+    others."""
+    asked = config.loop_closure.raplace.descriptor
+    used = descriptor_config_of(m, asked)
+    if used == asked:
+        return config
+    changed = [
+        f"{f.name} {getattr(asked, f.name)} -> {getattr(used, f.name)}"
+        for f in dataclasses.fields(used)
+        if getattr(asked, f.name) != getattr(used, f.name)
+    ]
+    log.warning(
+        "loop_closure.raplace.descriptor: the map's settings replace the config's (%s)",
+        ", ".join(changed),
+    )
+    raplace = dataclasses.replace(config.loop_closure.raplace, descriptor=used)
+    loop_closure = dataclasses.replace(config.loop_closure, raplace=raplace)
+    return dataclasses.replace(config, loop_closure=loop_closure)
+
+
 def image_geometry_of(m: Map) -> ImageGeometry:
     """The keyframe image geometry recorded in the map."""
     try:

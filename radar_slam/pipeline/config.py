@@ -94,8 +94,9 @@ def open_configured(
     with them (opening is lazy). The ground truth and the first scan are then read, so that a
     malformed file fails before any work rather than after it.
     """
-    load_config(None, path, overrides)  # a mistake fails before any data is generated
-    sequence = open_sequence(spec, data_root)
+    early = load_config(None, path, overrides)  # a mistake fails before any data is generated
+    options = early.dataset if early.dataset.loader_options() else None
+    sequence = open_sequence(spec, data_root, options)  # with e.g. --topic from the first
     config = load_config(sequence.family, path, overrides)
     if config.dataset.loader_options():
         sequence = open_sequence(spec, data_root, config.dataset)

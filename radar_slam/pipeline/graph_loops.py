@@ -1,16 +1,30 @@
-"""Verified radar loops added to another odometry's pose graph (`radar-slam loops`)."""
+"""Verified radar loops added to another odometry's pose graph (`radar-slam loops`).
+
+Edges of the input graph between vertices that are not consecutive are the input's own loops.
+They are treated like ours: each must agree with the odometry path between its two vertices
+(within the drift model of the loop consistency check, `odometry_segment_covariance`) or it is
+left out of the optimisation with a warning naming it; the rest enter under the robust loop
+kernel, and one that the final pass then finds inconsistent (weight below
+`BACKEND_REJECT_WEIGHT`) is named in a warning too.
+"""
 
 from __future__ import annotations
 
+import logging
 import time
+from dataclasses import dataclass
+
+import numpy as np
 
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import RadarSlamError
-from radar_slam.g2o import G2oGraph, g2o_to_pose_graph
-from radar_slam.graph import LoopConstraint
+from radar_slam.g2o import G2oEdge, G2oGraph, g2o_to_pose_graph
+from radar_slam.graph import LoopConstraint, PoseGraph
 from radar_slam.loops import (
     make_loop_detector,
 )
+from radar_slam.loops.config import ConsistencyConfig
+from radar_slam.loops.consistency import odometry_segment_covariance
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.pipeline.records import (
     GraphLoopsRun,
@@ -18,9 +32,98 @@ from radar_slam.pipeline.records import (
     ProgressCallback,
 )
 from radar_slam.pipeline.steps import (
+    BACKEND_REJECT_WEIGHT,
     review_loops,
     sequence_label,
 )
+from raplace.se2 import between, wrap_angle
+
+logger = logging.getLogger(__name__)
+
+GROSS_CHI2 = 100.0
+"""An input loop whose squared Mahalanobis distance from the odometry path between its vertices
+exceeds this (a ten-sigma error) is grossly inconsistent and left out of the optimisation."""
+
+
+@dataclass(frozen=True)
+class InputLoop:
+    """A loop edge of the input graph and its disagreement with the odometry.
+
+    Attributes:
+        edge: the g2o edge (vertex ids i, j).
+        chi2: squared Mahalanobis distance of its measurement from the odometry's T_i^-1 T_j,
+            under the loop's covariance plus the drift of the odometry path between i and j.
+        error_m: translation part of that disagreement [m].
+    """
+
+    edge: G2oEdge
+    chi2: float
+    error_m: float
+
+    @property
+    def gross(self) -> bool:
+        """Grossly inconsistent with the odometry (left out)."""
+        return self.chi2 > GROSS_CHI2
+
+    def name(self) -> str:
+        return f"EDGE_SE2 {self.edge.i} {self.edge.j}"
+
+
+def input_loops(record: G2oGraph, cfg: ConsistencyConfig) -> list[InputLoop]:
+    """The input graph's edges between non-consecutive vertices, each checked against the
+    odometry path (the vertex poses) between its two vertices."""
+    keys = record.keys()
+    rank = {key: n for n, key in enumerate(keys)}
+    poses = record.poses()
+    path_m = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
+    loops = []
+    for edge in record.edges:
+        a, b = rank[edge.i], rank[edge.j]
+        if abs(a - b) == 1:
+            continue
+        predicted = between(poses[a], poses[b])
+        error = np.asarray(between(predicted, edge.measurement), dtype=np.float64)
+        error[2] = wrap_angle(error[2])
+        covariance = edge.covariance + odometry_segment_covariance(abs(path_m[b] - path_m[a]), cfg)
+        chi2 = float(error @ np.linalg.solve(covariance, error))
+        loops.append(InputLoop(edge, chi2, float(np.hypot(error[0], error[1]))))
+    return loops
+
+
+def graph_of_input(record: G2oGraph, config: PipelineConfig) -> tuple[PoseGraph, list[InputLoop]]:
+    """The input as a `PoseGraph` without its grossly inconsistent loops (each named in a
+    warning), and its loops."""
+    loops = input_loops(record, config.loop_closure.consistency)
+    gross = [loop for loop in loops if loop.gross]
+    for loop in gross:
+        logger.warning(
+            "%s contradicts the odometry between its vertices by %.2f m (chi2 %.0f); left out "
+            "of the optimisation",
+            loop.name(),
+            loop.error_m,
+            loop.chi2,
+        )
+    left_out = {id(loop.edge) for loop in gross}
+    kept = [edge for edge in record.edges if id(edge) not in left_out]
+    trusted = G2oGraph(record.vertices, kept, record.fixed)
+    return g2o_to_pose_graph(trusted, config.graph), loops
+
+
+def warn_of_rejected_input_loops(graph: PoseGraph, loops: list[InputLoop]) -> None:
+    """Name the input loops that the final pass weighted down as inconsistent."""
+    weights = graph.loop_weights()
+    ids = {(c.i, c.j): n for n, c in graph.constraints() if c.kind == "loop"}
+    for loop in loops:
+        n = ids.get((loop.edge.i, loop.edge.j))
+        weight = weights.get(n, 1.0) if n is not None else 1.0
+        if not loop.gross and weight < BACKEND_REJECT_WEIGHT:
+            logger.warning(
+                "%s is inconsistent with the rest of the graph (weight %.2f after the final "
+                "%s pass); it barely acts on the result",
+                loop.name(),
+                weight,
+                graph.config.final_pass,
+            )
 
 
 def close_loops_on_graph(
@@ -44,7 +147,7 @@ def close_loops_on_graph(
             f"the graph has {len(keys)} vertices but {sequence_label(sequence)} has "
             f"{len(sequence)} scans; expected one vertex per scan, in scan order"
         )
-    graph = g2o_to_pose_graph(record, config.graph)
+    graph, given = graph_of_input(record, config)
     poses = record.poses()
     scan_of_key = {key: n for n, key in enumerate(keys)}
     detector = make_loop_detector(
@@ -65,4 +168,8 @@ def close_loops_on_graph(
     graph.update()
     graph.optimize_final()
     review_loops(graph, loop_ids, detector)
-    return GraphLoopsRun(graph, detector.decisions, time.perf_counter() - start)
+    warn_of_rejected_input_loops(graph, given)
+    left_out = sum(loop.gross for loop in given)
+    return GraphLoopsRun(
+        graph, detector.decisions, time.perf_counter() - start, len(given), left_out
+    )

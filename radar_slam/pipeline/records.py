@@ -178,11 +178,16 @@ class GraphLoopsRun:
         graph: the input graph with the accepted loops added, optimised.
         loops: every verified proposal with its status.
         seconds: wall time [s].
+        input_loops: edges of the input graph between non-consecutive vertices.
+        input_loops_left_out: of those, the ones left out as grossly inconsistent with the
+            odometry (each named in a warning).
     """
 
     graph: PoseGraph
     loops: list[LoopDecision]
     seconds: float
+    input_loops: int = 0
+    input_loops_left_out: int = 0
 
     @property
     def n_accepted(self) -> int:

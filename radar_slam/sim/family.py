@@ -23,6 +23,7 @@ from pathlib import Path
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.mulran import MulRanSequence
 from radar_slam.datasets.navtech import MULRAN_N_BINS, MULRAN_RANGE_RESOLUTION_M, SCAN_RATE_HZ
+from radar_slam.datasets.open import closest
 from radar_slam.datasets.registry import Family, family_folder, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
 from radar_slam.results import check_writable, pid_alive
@@ -87,8 +88,10 @@ def resolve_synthetic(root: Path, name: str) -> Path:
         DatasetNotFoundError: `name` is not a scenario.
     """
     if name not in SCENARIOS:
+        close = closest(name, list(SCENARIOS))
+        hint = f" (closest: {', '.join(close)})" if close else ""
         raise DatasetNotFoundError(
-            f"synthetic/{name}: no such scenario; known: {', '.join(SCENARIOS)}"
+            f"synthetic/{name}: no such scenario{hint}; `radar-slam simulate --help` lists them"
         )
     base = family_folder(root, SYNTHETIC_FAMILY)
     folder = base / name

@@ -156,7 +156,6 @@ def interpolate_poses(
     times_ns: NDArray[np.int64],
     poses: NDArray[np.float64],
     query_ns: NDArray[np.int64],
-    clamp_ns: int | None = None,
     max_gap_ns: int | None = None,
 ) -> NDArray[np.float64]:
     """Interpolate SE(2) poses to query times; NaN rows where the poses do not tell.
@@ -170,15 +169,12 @@ def interpolate_poses(
         times_ns: (N,) strictly increasing pose times [ns].
         poses: (N, 3) poses (x, y, yaw).
         query_ns: (M,) times to interpolate at [ns].
-        clamp_ns: kept for callers of the former end-pose tolerance; outside the span there is
-            never a pose, whatever its value.
         max_gap_ns: the longest gap between two samples that is interpolated over [ns] (e.g.
             `gt_max_gap_ns(times_ns)`, the family's tolerance); None interpolates over any gap.
 
     Returns:
         (M, 3) interpolated poses, yaw wrapped to [-pi, pi); NaN rows as above.
     """
-    del clamp_ns  # the end pose is never held
     origin = times_ns[0]
     t = (times_ns - origin).astype(np.float64)
     q = (query_ns - origin).astype(np.float64)

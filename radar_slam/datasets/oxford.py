@@ -304,7 +304,7 @@ class OxfordSequence:
         # The chain is sampled at the scans themselves: shifted, it is interpolated between them.
         known = np.isfinite(chain[:, 0])
         return interpolate_poses(
-            self._times_ns[known], chain[known], self._times_ns + self.gt_time_offset_ns, 0
+            self._times_ns[known], chain[known], self._times_ns + self.gt_time_offset_ns
         )
 
     @property

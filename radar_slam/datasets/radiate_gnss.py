@@ -191,9 +191,7 @@ class GnssTrack:
                 [m]; the radar is taken to face forward.
         """
         query = np.asarray(query_ns, dtype=np.int64)
-        antenna = interpolate_poses(self.times_ns, self.poses, query, clamp_ns=0)
-        for start, end in self.outages:
-            antenna[(query > start) & (query < end)] = np.nan
+        antenna = interpolate_poses(self.times_ns, self.poses, query, max_gap_ns=MAX_FIX_GAP_NS)
         lever = np.array([lever_arm_m[0], lever_arm_m[1], 0.0])
         return se2.compose(antenna, lever)
 

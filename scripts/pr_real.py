@@ -19,9 +19,13 @@ through the clock offset estimated from the odometry:
   show how far apart places must be told.
 
 GNSS without RTK is metre level, so the 0-5 m band's edge is soft. Methods: RaPlace and Radar
-Scan Context with their default settings.
+Scan Context with their default settings. Last, the RaPlace distances of the real non-revisits
+are compared with those of a simulated drive (`--simulated`, generated on first use under
+`--sim-root`): the Kolmogorov-Smirnov distance between the two says how much easier the
+simulator's places are to tell apart.
 
-Usage: python scripts/pr_real.py [--data-root ../shared/data] [--write-doc]
+Usage: python scripts/pr_real.py [--data-root ../shared/data] [--simulated synthetic/loop]
+       [--sim-root data] [--write-doc]
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ import numpy as np
 from bench_real import EDINBURGH, real_data_parser
 from benchmark_doc import machine_line, update_section
 from numpy.typing import NDArray
+from scipy import stats
 
 from radar_slam.datasets import DatasetConfig, open_sequence
 from radar_slam.datasets.frame import RadarSequence
@@ -45,6 +50,7 @@ from raplace.scancontext import column_shift_distance
 from raplace.scoring import score, theta_spectrum
 
 BANDS_M = ((0.0, 5.0), (5.0, 10.0))
+SIMULATED = "synthetic/loop"
 NEGATIVE_M = 50.0
 
 
@@ -119,8 +125,43 @@ def band_curves(
     return retrieval, pairwise
 
 
-def run(root: Path) -> tuple[str, float]:
-    """The Markdown table and the GNSS clock offset used."""
+def non_revisit_distances(
+    described: NDArray[np.float32], xy: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """RaPlace distances of every pair of scans more than `NEGATIVE_M` apart (each pair once)."""
+    distances = distance_matrix("RaPlace", described, described)
+    gap = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+    upper = np.triu(gap > NEGATIVE_M, k=1)
+    return distances[upper]
+
+
+def confusability(real: NDArray[np.float64], root: Path, simulated: str) -> str:
+    """How alike the RaPlace distances of real and simulated non-revisits are (two-sample
+    Kolmogorov-Smirnov distance): a simulator whose places are easier to tell apart flatters."""
+    sequence = open_sequence(simulated, root)
+    assert sequence.ground_truth is not None
+    cfg = RaPlaceConfig()
+    extract = DescriptorExtractor(cfg.descriptor)
+    known = np.flatnonzero(np.isfinite(sequence.ground_truth[:, 0]))
+    frames = (sequence[int(i)] for i in known)
+    described = np.stack([extract(f.polar, f.azimuths_rad, f.range_resolution_m) for f in frames])
+    sim = non_revisit_distances(described, sequence.ground_truth[known, :2])
+    ks = stats.ks_2samp(real, sim).statistic
+    quantiles = (0.05, 0.5, 0.95)
+    q_real = ", ".join(f"{v:.3f}" for v in np.quantile(real, quantiles))
+    q_sim = ", ".join(f"{v:.3f}" for v in np.quantile(sim, quantiles))
+    return (
+        f"RaPlace distances of non-revisits (pairs more than {NEGATIVE_M:.0f} m apart), "
+        f"5/50/95 %: real {q_real}; `{simulated}` {q_sim}; Kolmogorov-Smirnov distance "
+        f"{ks:.2f}."
+    )
+
+
+def run(
+    root: Path, simulated: str | None = None, sim_root: Path | None = None
+) -> tuple[str, float]:
+    """The Markdown table (and, with `simulated`, the confusability line) and the GNSS clock
+    offset used."""
     sequence, xy, offset_s = gnss_positions(root)
     known = np.isfinite(xy[:, 0])
     cfg = RaPlaceConfig()
@@ -150,12 +191,23 @@ def run(root: Path) -> tuple[str, float]:
         f"negatives more than {NEGATIVE_M:.0f} m apart; descriptors (both methods, both "
         f"directions) {per_scan_ms:.0f} ms per scan and direction."
     )
-    return head + "\n\n" + "\n".join(lines), offset_s
+    text = head + "\n\n" + "\n".join(lines)
+    if simulated is not None:
+        real = non_revisit_distances(described["RaPlace"]["same"][k], xy[k])
+        text += "\n\n" + confusability(real, sim_root or root, simulated)
+    return text, offset_s
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = real_data_parser(__doc__.splitlines()[0]).parse_args(argv)
-    text, _ = run(args.data_root)
+    parser = real_data_parser(__doc__.splitlines()[0])
+    parser.add_argument(
+        "--simulated",
+        default=SIMULATED,
+        help="a simulated drive whose non-revisit distances are compared with the real ones",
+    )
+    parser.add_argument("--sim-root", type=Path, default=Path("data"), help="its data root")
+    args = parser.parse_args(argv)
+    text, _ = run(args.data_root, args.simulated, args.sim_root)
     print(f"{machine_line('scripts/pr_real.py')}\n\n{text}")
     if args.write_doc:
         update_section("Place recognition on real scans", text, script="scripts/pr_real.py")

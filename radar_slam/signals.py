@@ -59,13 +59,22 @@ def restore(previous: Handlers) -> None:
 
 @contextmanager
 def children_ignore_sigint() -> Iterator[None]:
-    """Processes started inside this block never see SIGINT (it is blocked, and a blocked-signal
-    mask is inherited); a Ctrl-C meanwhile reaches this process when the block ends."""
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    """Processes started inside this block never see SIGINT.
+
+    SIGINT is ignored while the block runs: an ignored signal stays ignored across fork and
+    exec, and a Python process that starts with SIGINT ignored keeps it so, whichever thread
+    spawns it (a blocked-signal mask would be per thread: a library's own thread would spawn
+    children that see it). A Ctrl-C pressed meanwhile is lost, so the block should be short (the
+    start of worker processes). Outside the main thread nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        signal.signal(signal.SIGINT, previous)
 
 
 def was_interrupted() -> bool:

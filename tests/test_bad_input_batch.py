@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import psutil
 import pytest
 from bad_input_support import assert_refused
 
@@ -19,6 +20,7 @@ from radar_slam.signals import SIGINT_EXIT_CODE
 
 TIMEOUT_S = 180.0
 POLL_S = 0.05
+SETTLE_S = 1.0
 UNREACHABLE = "tcp://127.0.0.1:9"
 """The discard port: nothing listens there."""
 
@@ -31,6 +33,19 @@ def test_unreachable_scheduler_leaves_nothing(
     args: list[str | Path] = ["batch", "synthetic/tiny", "--scheduler", UNREACHABLE]
     args += ["--out", workdir / "b", "--data-root", synthetic_root, "--max-frames", "2"]
     assert_refused(capsys, (workdir, synthetic_root), args, UNREACHABLE, "cannot connect")
+
+
+def _worker_started(pid: int) -> bool:
+    """True once a worker process (a multiprocessing child of the batch) runs and the batch no
+    longer ignores SIGINT (it does while its workers start, so that they never see it)."""
+    try:
+        children = psutil.Process(pid).children(recursive=True)
+        status = Path(f"/proc/{pid}/status").read_text()
+    except (psutil.Error, OSError):
+        return False
+    ignored = int(next(line for line in status.splitlines() if line.startswith("SigIgn:"))[7:], 16)
+    sigint_ignored = bool(ignored & (1 << (signal.SIGINT - 1)))
+    return not sigint_ignored and any("spawn_main" in " ".join(c.cmdline()) for c in children)
 
 
 def _new_group_default_sigint() -> None:
@@ -56,14 +71,13 @@ def test_ctrl_c_ends_a_batch_without_tracebacks_or_leftovers(
             preexec_fn=_new_group_default_sigint,
         )
         deadline = time.monotonic() + TIMEOUT_S
-        # the run's staging folder appears when a worker starts writing ... or the batch
-        # staging folder once the cluster runs
-        while not list(work.glob(".b.partial-*/*")) and process.poll() is None:
+        # a Ctrl-C while the workers start is ignored: wait for the worker process to be up
+        while not _worker_started(process.pid) and process.poll() is None:
             assert time.monotonic() < deadline
             time.sleep(POLL_S)
+        time.sleep(SETTLE_S)  # the cluster is up and the task running on the worker
         if process.poll() is not None:
             pytest.skip("the batch ended before the signal")
-        time.sleep(2.0)  # the task is running on the worker
         os.killpg(process.pid, signal.SIGINT)
         process.wait(timeout=TIMEOUT_S)
     text = log.read_text(errors="replace")

@@ -69,8 +69,8 @@ def test_signal_ends_with_its_exit_code_and_one_line(
             pytest.skip("the run ended before the signal")
         process.send_signal(sig)
         process.wait(timeout=TIMEOUT_S)
-    if process.returncode == -sig:  # no program can handle a signal before its interpreter runs
-        pytest.skip("the signal arrived before the interpreter had started (a busy machine)")
+    if when == "start-up" and process.returncode < 0:  # died by a signal while starting
+        pytest.skip("the signal arrived before the handlers were in place (a busy machine)")
     text = log.read_text(errors="replace")
     assert process.returncode == EXIT_CODES[sig], text
     assert "Traceback" not in text

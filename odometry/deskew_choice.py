@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from odometry import rate_search
 from odometry.config import OdometryConfig
 from odometry.deskew import twist_from_motion
+from odometry.rate_search import Register
 from odometry.reference_time import image_time_ns
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.state import ScanNode
@@ -66,6 +67,7 @@ def with_trend(
     estimate: MotionEstimate,
     velocity: Velocity | None,
     cfg: OdometryConfig,
+    register: Register = register_images,
 ) -> Rendered:
     """`scan` (de-skewed at constant velocity) and its estimate, or the scan de-skewed with
     the yaw-rate trend and its registration (seeded with the first) when that correlates
@@ -76,7 +78,7 @@ def with_trend(
     if close_twists(trend, scan.twist):
         return scan, estimate
     alternative = PreparedScan(scan.polar, trend, cfg)
-    other = register_images(reference.scan, alternative, cfg, hint=estimate.motion)
+    other = register(reference.scan, alternative, cfg, hint=estimate.motion)
     if other.ok and other.quality > estimate.quality:
         return alternative, other
     return scan, estimate
@@ -89,6 +91,7 @@ def redeskewed(
     interval_s: float,
     velocity: Velocity | None,
     cfg: OdometryConfig,
+    register: Register = register_images,
 ) -> Rendered:
     """The scan and its estimate (`rendered`), re-rendered and re-registered when the velocity
     it was de-skewed with is far from the one its registration measures since `base`
@@ -102,7 +105,7 @@ def redeskewed(
     if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
         return rendered
     again = PreparedScan(scan.polar, measured, cfg)
-    redone = register_images(reference.scan, again, cfg, hint=estimate.motion)
+    redone = register(reference.scan, again, cfg, hint=estimate.motion)
     return (again, redone) if redone.ok else rendered
 
 
@@ -112,6 +115,7 @@ def rate_searched(
     interval_s: float,
     last_quality: float,
     cfg: OdometryConfig,
+    register: Register = register_images,
 ) -> Rendered:
     """The scan and its estimate (`rendered`), or the scan de-skewed at a yaw rate searched by
     peak quality where the search is wanted (`rate_search.rounds_wanted`: low frame rates,
@@ -120,7 +124,7 @@ def rate_searched(
     rounds = rate_search.rounds_wanted(scan, estimate, interval_s, last_quality, cfg)
     if rounds == 0:
         return rendered
-    return rate_search.searched(reference.scan, scan, estimate, cfg, register_images, rounds)
+    return rate_search.searched(reference.scan, scan, estimate, cfg, register, rounds)
 
 
 def step_searched(
@@ -130,6 +134,7 @@ def step_searched(
     interval_s: float,
     velocity: Velocity | None,
     cfg: OdometryConfig,
+    register: Register = register_images,
 ) -> Rendered:
     """The scan and its estimate (`rendered`), or the scan de-skewed with a step of the yaw
     rate within its sweep where the yaw rate measured since `base` (`interval_s` [s] before)
@@ -146,7 +151,7 @@ def step_searched(
     )
     if not rate_search.step_wanted(scan, estimate, rates, cfg):
         return rendered
-    return rate_search.step_searched(reference.scan, scan, estimate, rates, cfg, register_images)
+    return rate_search.step_searched(reference.scan, scan, estimate, rates, cfg, register)
 
 
 def keyframe_rate(

@@ -45,6 +45,8 @@ class OdometryResult:
         gap: the pose is a constant-velocity prediction covering a failed registration.
         quality: peak-to-noise ratio of the translation peak (0 for the first scan or a gap).
         reason: why the registration failed ("" when ok).
+        registrations: image registrations (`registration.register_images`, coarse and fine
+            levels counting as one) run for this scan.
     """
 
     index: int
@@ -59,6 +61,7 @@ class OdometryResult:
     gap: bool
     quality: float
     reason: str = ""
+    registrations: int = 0
 
 
 class ResultHistory:

@@ -135,6 +135,13 @@ class Odometry:
         return best
 
     @property
+    def registrations_per_scan(self) -> float:
+        """Image registrations (`OdometryResult.registrations`) per scan after the first, on
+        average (0 before the second scan)."""
+        counts = [r.registrations for r in self.results[1:]]
+        return float(np.mean(counts)) if counts else 0.0
+
+    @property
     def keyframes(self) -> list[int]:
         """Indices of the scans that became keyframes."""
         return [r.index for r in self.results if r.is_keyframe]
@@ -167,6 +174,7 @@ class Odometry:
             OdometryError: the scan is malformed or not later than the previous one.
         """
         state = self._state
+        state.registrations = 0
         index = len(state.history)
         scan = self._prepare(frame)
         previous = state.previous
@@ -183,7 +191,7 @@ class Odometry:
         if reference is None:
             return self._gap(index, scan, predicted, estimate)
         scan, estimate = deskew_choice.with_trend(
-            reference, scan, estimate, state.velocity, self.config
+            reference, scan, estimate, state.velocity, self.config, self._register_images
         )
         return self._accept(index, scan, reference, estimate, dt_s)
 
@@ -263,13 +271,13 @@ class Odometry:
         disagrees with the prediction also seeded with the prediction; the stronger correlation
         wins (see the module docstring)."""
         cfg = self.config
-        estimate = register_images(reference.scan, scan, cfg)
+        estimate = self._register_images(reference.scan, scan, cfg)
         if predicted is None:
             return estimate
         expected = between(reference.image_pose, predicted)
         if estimate.ok and recovery.agrees(estimate.motion, expected, self.config):
             return estimate
-        seeded = register_images(reference.scan, scan, cfg, hint=expected)
+        seeded = self._register_images(reference.scan, scan, cfg, hint=expected)
         strong = estimate.ok or estimate.implausible  # the images support it
         if seeded.ok and (not strong or seeded.quality > estimate.quality):
             logger.debug(
@@ -410,14 +418,31 @@ class Odometry:
         that follow a measured velocity (`deskew_choice`: re-de-skewed at the measured
         velocity, the yaw rate searched, a rate step searched); `base` is the scan the velocity
         is measured from, `interval_s` [s] before."""
-        velocity, cfg = self._state.velocity, self.config
-        rendered = deskew_choice.redeskewed(reference, base, rendered, interval_s, velocity, cfg)
+        velocity, cfg, register = self._state.velocity, self.config, self._register_images
+        rendered = deskew_choice.redeskewed(
+            reference, base, rendered, interval_s, velocity, cfg, register
+        )
         if velocity is not None:
             last = self._state.history[len(self._state.history) - 1].quality
-            rendered = deskew_choice.rate_searched(reference, rendered, interval_s, last, cfg)
-        return deskew_choice.step_searched(reference, base, rendered, interval_s, velocity, cfg)
+            rendered = deskew_choice.rate_searched(
+                reference, rendered, interval_s, last, cfg, register
+            )
+        return deskew_choice.step_searched(
+            reference, base, rendered, interval_s, velocity, cfg, register
+        )
 
     # -- helpers ------------------------------------------------------------------------------
+    def _register_images(
+        self,
+        reference: PreparedScan,
+        scan: PreparedScan,
+        cfg: OdometryConfig,
+        hint: FloatArray | None = None,
+    ) -> MotionEstimate:
+        """`registration.register_images`, counted in the scan's result (`registrations`)."""
+        self._state.registrations += 1
+        return register_images(reference, scan, cfg, hint)
+
     def _place_first_images(
         self, reference: ScanNode, scan: PreparedScan, image_motion: FloatArray
     ) -> None:
@@ -556,6 +581,7 @@ class Odometry:
             gap=gap,
             quality=float(quality),
             reason=reason,
+            registrations=self._state.registrations,
         )
         self._state.history.append(result)
         return result

@@ -49,3 +49,4 @@ class OdometryState:
     earlier_keyframes: list[ScanNode] = field(default_factory=list)  # most recent first
     velocity: Velocity | None = None
     history: ResultHistory = field(default_factory=ResultHistory)
+    registrations: int = 0  # image registrations run for the scan being registered

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.datasets import DatasetConfig, RadarFrame, open_sequence
+from radar_slam.datasets import RadarFrame, open_sequence
 from radar_slam.datasets.frame import GroundTruthSource, RadarSequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import TrajectoryMetrics

@@ -1,0 +1,260 @@
+"""Ablate the odometry: each mechanism switched off in turn, on real and simulated drives.
+
+Every variant runs the odometry (`radar_slam.pipeline.run_odometry`, the family config as
+`radar-slam odometry` loads it) with one mechanism off, through its config key or, where it has
+none, a small override patched in for the run. Drives:
+
+- the RADIATE Edinburgh drive (real, GNSS/INS ground truth) at 4 Hz and at the `--real-stride`
+  strides; scored with the GT clock offset estimated from the odometry's speed profile (ATE,
+  end-point error, drift over 400-800 m segments);
+- the Oxford scans (real, GT radar odometry): ATE and RPE;
+- the `--sim` simulated drives at 4 Hz and stride 4: drift and the longest run of gaps.
+
+Each cell also gives the registrations per scan (`OdometryResult.registrations`, coarse and fine
+count as one). Mechanisms that only run at a low frame rate (an image interval of
+`DeskewConfig.yaw_rate_search_min_interval_s` or more) are run only on the strides where they act
+(their other cells equal the baseline). The defaults take about half an hour on two shared
+cores (the real drive at 4 Hz is most of it);
+`--variants` runs a subset, `--real-stride` and `--sim` choose the drives, `--max-frames` cuts the
+simulated drives (the real drive always runs in full: its GT offset needs the speed profile).
+
+Usage: python scripts/ablate_odometry.py [--data-root ../shared/data] [--sim-root DIR]
+           [--real-stride 4 ...] [--sim tiny_u_turn ...] [--variants base,no_rate_step,...]
+           [--max-frames N] [--out FILE.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import odometry.deskew_choice as deskew_choice
+import odometry.odometry as odometry_module
+import odometry.recovery as recovery
+from radar_slam.datasets import open_sequence
+from radar_slam.datasets.stride import strided
+from radar_slam.pipeline import load_config, run_odometry
+
+logger = logging.getLogger("ablate_odometry")
+
+DEFAULT_ROOT = Path(__file__).resolve().parents[2] / "shared" / "data"
+REAL_DRIVE = "radiate/edinburgh_2019-02-12-15-33"
+OXFORD = "oxford/2019-01-10-14-36-48-partial"
+DEFAULT_REAL_STRIDES = (1, 4)
+DEFAULT_SIMS = ("tiny_u_turn", "tiny_roundabout")
+SIM_STRIDES = (1, 4)
+LOW_RATE_STRIDE = 4
+"""4 Hz data at this stride has image intervals long enough for the low-rate mechanisms."""
+NEVER_S = 1e9
+"""An image interval no drive reaches [s] (switches the low-rate yaw search off)."""
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One row: the odometry with one mechanism off.
+
+    Attributes:
+        name: short name (`--variants`).
+        mechanism: what is switched off, as the table says it.
+        overrides: the `odometry:` config keys changed (nested mapping).
+        patch: a context manager that switches off a mechanism without a key (None: none).
+        low_rate_only: the mechanism only acts at a low frame rate (run only at that stride).
+    """
+
+    name: str
+    mechanism: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+    patch: Callable[[], contextlib.AbstractContextManager[None]] | None = None
+    low_rate_only: bool = False
+
+
+@contextlib.contextmanager
+def _patched(module: object, name: str, replacement: object) -> Iterator[None]:
+    original = getattr(module, name)
+    setattr(module, name, replacement)
+    try:
+        yield
+    finally:
+        setattr(module, name, original)
+
+
+def _no_redeskew() -> contextlib.AbstractContextManager[None]:
+    return _patched(deskew_choice, "redeskewed", lambda _r, _b, rendered, *_a, **_k: rendered)
+
+
+def _no_implausible_wins() -> contextlib.AbstractContextManager[None]:
+    return _patched(recovery, "preferred", lambda found, _implausible: found)
+
+
+def _no_deferred_first_images() -> contextlib.AbstractContextManager[None]:
+    return _patched(odometry_module.Odometry, "_place_first_images", lambda *_a: None)
+
+
+def _keyframe_only() -> contextlib.AbstractContextManager[None]:
+    return _patched(recovery, "fallback_references", lambda keyframe, *_a: [keyframe])
+
+
+VARIANTS = (
+    Variant("base", "(nothing: the defaults)"),
+    Variant("no_rate_step", "rate-step search", {"deskew": {"rate_step_candidates": 0}}),
+    Variant(
+        "no_slow_search",
+        "slow-rate yaw search",
+        {"deskew": {"yaw_rate_search_min_interval_s": NEVER_S}},
+        low_rate_only=True,
+    ),
+    Variant(
+        "no_weak_search", "weak-peak search", {"deskew": {"yaw_rate_search_weak_fraction": 0.0}}
+    ),
+    Variant(
+        "no_keyframe_rate",
+        "keyframe yaw-rate formula",
+        {"deskew": {"keyframe_rate_change": False}},
+        low_rate_only=True,
+    ),
+    Variant("no_trend", "yaw-trend hypothesis", {"deskew": {"yaw_rate_extrapolation": 0.0}}),
+    Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
+    Variant("no_implausible", "implausible but strongest wins", patch=_no_implausible_wins),
+    Variant("no_deferred", "deferred first images", patch=_no_deferred_first_images),
+    Variant("no_fallback", "fallback chain (keyframe only)", patch=_keyframe_only),
+    Variant("no_revision", "revised pose history", {"deskew": {"revise_reference_pose": False}}),
+    Variant("one_refine", "second Fourier-Mellin refinement", {"rotation": {"refine_passes": 1}}),
+    Variant("no_refine", "Fourier-Mellin refinement", {"rotation": {"refine": False}}),
+)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One drive's figures for one variant (None: not measured)."""
+
+    ate_m: float | None = None
+    end_pct: float | None = None
+    drift_pct: float | None = None
+    longest_gap_run: int = 0
+    registrations: float = 0.0
+
+
+def _run(
+    spec: str,
+    root: Path,
+    stride: int,
+    variant: Variant,
+    max_frames: int | None,
+    with_offset: bool,
+) -> Cell:
+    """Run `variant` over `spec` at `stride` and score it."""
+    family = spec.split("/")[0]
+    config = load_config(family, overrides={"odometry": variant.overrides})
+    sequence = strided(open_sequence(spec, data_root=root), stride)
+    patch = variant.patch() if variant.patch is not None else contextlib.nullcontext()
+    with patch:
+        run = run_odometry(sequence, config, max_frames=max_frames)
+    counts = [r.registrations for r in run.results[1:]]
+    best = run_ = 0
+    for result in run.results:
+        run_ = run_ + 1 if result.gap else 0
+        best = max(best, run_)
+    metrics = run.metrics
+    if with_offset and run.gt_report is not None:
+        metrics = run.gt_report.offset_applied.get("odometry", metrics)
+    if metrics is None:
+        return Cell(longest_gap_run=best, registrations=float(np.mean(counts)))
+    return Cell(
+        ate_m=metrics.ate_rmse_m,
+        end_pct=metrics.end_point_error_pct,
+        drift_pct=metrics.drift_trans_pct,
+        longest_gap_run=best,
+        registrations=float(np.mean(counts)),
+    )
+
+
+def _fmt(value: float | None, digits: int = 2) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+@dataclass(frozen=True)
+class Drive:
+    """A column group of the table."""
+
+    label: str
+    spec: str
+    root: Path
+    stride: int
+    kind: str  # "real" (ATE with the GT offset, end point, drift), "oxford" or "sim"
+
+    def header(self) -> list[str]:
+        if self.kind == "real":
+            return [f"{self.label} ATE m", "end %", "drift %", "reg/scan"]
+        if self.kind == "oxford":
+            return [f"{self.label} ATE m", "reg/scan"]
+        return [f"{self.label} drift %", "gaps", "reg/scan"]
+
+    def cells(self, cell: Cell | None) -> list[str]:
+        if cell is None:
+            return ["= base"] + [""] * (len(self.header()) - 1)
+        reg = _fmt(cell.registrations)
+        if self.kind == "real":
+            return [_fmt(cell.ate_m), _fmt(cell.end_pct), _fmt(cell.drift_pct), reg]
+        if self.kind == "oxford":
+            return [_fmt(cell.ate_m, 3), reg]
+        return [_fmt(cell.drift_pct), str(cell.longest_gap_run), reg]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data-root", type=Path, default=DEFAULT_ROOT)
+    parser.add_argument("--sim-root", type=Path, default=Path("/tmp/radar_slam_sim"))
+    parser.add_argument("--real-stride", type=int, action="append")
+    parser.add_argument("--sim", action="append")
+    parser.add_argument("--variants", help="comma-separated names (default: all)")
+    parser.add_argument("--max-frames", type=int)
+    parser.add_argument("--out", type=Path, help="also write the Markdown table here")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
+    logger.setLevel(logging.INFO)
+    logging.getLogger("odometry").setLevel(logging.ERROR)
+
+    drives = [
+        Drive(f"real {s}x" if s > 1 else "real 4 Hz", REAL_DRIVE, args.data_root, s, "real")
+        for s in (args.real_stride or DEFAULT_REAL_STRIDES)
+    ]
+    drives.append(Drive("Oxford", OXFORD, args.data_root, 1, "oxford"))
+    for name in args.sim or DEFAULT_SIMS:
+        for s in SIM_STRIDES:
+            label = name if s == 1 else f"{name} {s}x"
+            drives.append(Drive(label, f"synthetic/{name}", args.sim_root, s, "sim"))
+    wanted = None if args.variants is None else set(args.variants.split(","))
+    variants = [v for v in VARIANTS if wanted is None or v.name in wanted]
+
+    rows = []
+    for variant in variants:
+        start = time.perf_counter()
+        row = [variant.mechanism]
+        for drive in drives:
+            if variant.low_rate_only and drive.stride < LOW_RATE_STRIDE:
+                row += drive.cells(None)
+                continue
+            frames = None if drive.kind == "real" else args.max_frames
+            cell = _run(drive.spec, drive.root, drive.stride, variant, frames, drive.kind == "real")
+            row += drive.cells(cell)
+        rows.append(row)
+        logger.info("%s (%.0f s): %s", variant.name, time.perf_counter() - start, " | ".join(row))
+    header = ["mechanism off"] + [h for d in drives for h in d.header()]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    table = "\n".join(lines)
+    print(table)
+    if args.out is not None:
+        args.out.write_text(table + "\n")
+
+
+if __name__ == "__main__":
+    main()

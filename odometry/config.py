@@ -332,21 +332,6 @@ class DeskewConfig:
             against the keyframe both registered to; `odometry.rate_search.keyframe_yaw_rate`);
             False: at the velocity as measured (the mean, with the yaw-rate trend), as at
             higher rates.
-        rate_step_candidates: in `Odometry`, a scan whose mean yaw rate since the previous image
-            is `rate_step_min_dps` or more from the previous step's is also de-skewed with a step of
-            the yaw rate at this many times spread over the first half of its sweep
-            (`odometry.rate_search.step_searched`; 0: off); the strongest correlation, by more
-            than `rate_step_min_gain`, keeps its de-skew.
-        rate_step_min_dps: the yaw-rate change [deg/s] from which the step is searched.
-        rate_step_min_gain: a stepped de-skew replaces the kept one only when its peak quality
-            is higher by more than this fraction.
-        rate_step_max_change_dps: bound of a tried step [deg/s].
-        rate_step_max_interval_sweeps: the step is searched only when the previous image is at
-            most this many sweep durations before (consecutive scans: the rate before the step
-            is taken as held since then, which at half the frame rate is too long) ...
-        rate_step_max_prior_change_dps: ... and when the yaw rate measured at the step before
-            changed by at most this [deg/s] (a steady rate; in a smooth ramp of the yaw rate the
-            step model does not hold).
     """
 
     enabled: bool = True
@@ -361,12 +346,6 @@ class DeskewConfig:
     yaw_rate_search_weak_rounds: int = 1
     yaw_rate_search_slow_rounds: int = 3
     keyframe_rate_change: bool = True
-    rate_step_candidates: int = 8
-    rate_step_min_dps: float = 3.0
-    rate_step_min_gain: float = 0.05
-    rate_step_max_change_dps: float = 60.0
-    rate_step_max_interval_sweeps: float = 1.25
-    rate_step_max_prior_change_dps: float = 2.0
 
     def __post_init__(self) -> None:
         checks.at_least("iterations", self.iterations, 0)
@@ -379,12 +358,6 @@ class DeskewConfig:
         )
         checks.at_least("yaw_rate_search_weak_rounds", self.yaw_rate_search_weak_rounds, 1)
         checks.at_least("yaw_rate_search_slow_rounds", self.yaw_rate_search_slow_rounds, 1)
-        checks.at_least("rate_step_candidates", self.rate_step_candidates, 0)
-        checks.non_negative("rate_step_min_dps", self.rate_step_min_dps)
-        checks.non_negative("rate_step_min_gain", self.rate_step_min_gain)
-        checks.in_range("rate_step_max_change_dps", self.rate_step_max_change_dps, 0.0, 360.0)
-        checks.non_negative("rate_step_max_interval_sweeps", self.rate_step_max_interval_sweeps)
-        checks.non_negative("rate_step_max_prior_change_dps", self.rate_step_max_prior_change_dps)
 
 
 def _coarse() -> LevelConfig:

@@ -8,8 +8,7 @@ it (a stronger correlation) or the registration itself measured a different velo
 - `with_trend`: the yaw-rate trend as a second hypothesis (a turn that goes on tightening);
 - `redeskewed`: the velocity the registration measures, when far from the rendered one (hard
   braking, a curvature step);
-- `rate_searched`, `step_searched`: the yaw rate searched by peak quality, or a step of the yaw
-  rate inside the sweep (`odometry.rate_search`);
+- `rate_searched`: the yaw rate searched by peak quality (`odometry.rate_search`);
 - `refreshed`: a new keyframe re-rendered for the scans that will register against it, at low
   frame rates at `keyframe_rate`.
 
@@ -127,33 +126,6 @@ def rate_searched(
     return rate_search.searched(reference.scan, scan, estimate, cfg, register, rounds)
 
 
-def step_searched(
-    reference: ScanNode,
-    base: ScanNode,
-    rendered: Rendered,
-    interval_s: float,
-    velocity: Velocity | None,
-    cfg: OdometryConfig,
-    register: Register = register_images,
-) -> Rendered:
-    """The scan and its estimate (`rendered`), or the scan de-skewed with a step of the yaw
-    rate within its sweep where the yaw rate measured since `base` (`interval_s` [s] before)
-    stepped from a steady one (`rate_search.step_wanted`)."""
-    scan, estimate = rendered
-    if velocity is None or interval_s <= 0:
-        return rendered
-    measured = measured_twist(reference, base, estimate, interval_s)
-    rates = rate_search.StepRates(
-        before=float(velocity.twist[2]),
-        prior_change=velocity.yaw_rate_change,
-        measured=float(measured[2]),
-        interval_s=interval_s,
-    )
-    if not rate_search.step_wanted(scan, estimate, rates, cfg):
-        return rendered
-    return rate_search.step_searched(reference.scan, scan, estimate, rates, cfg, register)
-
-
 def keyframe_rate(
     reference: ScanNode, base: ScanNode, scan: PreparedScan, velocity: Velocity | None
 ) -> float | None:
@@ -180,12 +152,12 @@ def refreshed(
 ) -> PreparedScan:
     """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans),
     at the yaw rate `yaw_rate` [rad/s] (`keyframe_rate`, low frame rates) when given; `scan`
-    itself where nothing would change or a rate step was chosen by the images."""
+    itself where nothing would change."""
     dcfg = cfg.deskew
     if velocity is None or not dcfg.enabled or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
-    if scan.rate_step is not None or (scan.twist is not None and close_twists(new, scan.twist)):
+    if scan.twist is not None and close_twists(new, scan.twist):
         return scan
     if dcfg.keyframe_rate_change and yaw_rate is not None:
         new = new.copy()

@@ -416,7 +416,7 @@ class Odometry:
     ) -> Rendered:
         """The scan's rendering and registration against `reference` after the de-skew steps
         that follow a measured velocity (`deskew_choice`: re-de-skewed at the measured
-        velocity, the yaw rate searched, a rate step searched); `base` is the scan the velocity
+        velocity, the yaw rate searched); `base` is the scan the velocity
         is measured from, `interval_s` [s] before."""
         velocity, cfg, register = self._state.velocity, self.config, self._register_images
         rendered = deskew_choice.redeskewed(
@@ -427,9 +427,7 @@ class Odometry:
             rendered = deskew_choice.rate_searched(
                 reference, rendered, interval_s, last, cfg, register
             )
-        return deskew_choice.step_searched(
-            reference, base, rendered, interval_s, velocity, cfg, register
-        )
+        return rendered
 
     # -- helpers ------------------------------------------------------------------------------
     def _register_images(

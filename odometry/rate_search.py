@@ -23,26 +23,16 @@ the two sweeps), and the next scan's search matches it (docs/odometry_notes.md, 
 the previous scan was not a keyframe, both scans were searched against the same keyframe: the
 difference of their two searched rates is the change, and the reference's error cancels in it
 (stop 20).
-
-`step_searched` goes one step further where the yaw rate changed: a curvature step inside a sweep
-is a step of the yaw rate, which no constant de-skew follows (both sides of the step turn the
-image the same way; docs/odometry_notes.md). The scan is de-skewed with the rate before (the
-previous step's) up to a searched time and a rate after it that keeps the yaw measured since the
-previous image, and the time whose image correlates most strongly wins
-(`DeskewConfig.rate_step_*`). It runs only where that model holds: after a steady yaw rate, on
-consecutive scans.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import RateStep
 from odometry.registration import MotionEstimate, PreparedScan
 from odometry.velocity import bounded_twist
 
@@ -173,86 +163,3 @@ def _search_round(
     return max(
         (c for c in candidates if c[1].ok), key=lambda c: c[1].quality, default=(scan, estimate)
     )
-
-
-@dataclass(frozen=True)
-class StepRates:
-    """What a scan's rate-step search knows of the yaw rate.
-
-    Attributes:
-        before: the yaw rate of the previous step [rad/s] (taken as held up to the step).
-        prior_change: how much that rate changed from the step before it [rad/s].
-        measured: the mean yaw rate since the previous image, from this scan's registration
-            [rad/s].
-        interval_s: the time since the previous image [s].
-    """
-
-    before: float
-    prior_change: float
-    measured: float
-    interval_s: float
-
-
-def step_wanted(
-    scan: PreparedScan, estimate: MotionEstimate, rates: StepRates, cfg: OdometryConfig
-) -> bool:
-    """Whether `scan`'s de-skew is searched for a step of the yaw rate: the search is on, the
-    scan is de-skewed and registered, the previous image is at most
-    `DeskewConfig.rate_step_max_interval_sweeps` sweeps back, the rate before was steady (changed
-    by at most `rate_step_max_prior_change_dps`), and the measured rate is
-    `rate_step_min_dps` or more away from it."""
-    dcfg, timing = cfg.deskew, scan.polar.timing
-    if dcfg.rate_step_candidates == 0 or scan.twist is None or timing is None or not estimate.ok:
-        return False
-    sweep_s = abs(timing.row_period_s) * scan.polar.n_azimuths
-    if not 0.0 < rates.interval_s <= dcfg.rate_step_max_interval_sweeps * sweep_s:
-        return False
-    if abs(rates.prior_change) > np.deg2rad(dcfg.rate_step_max_prior_change_dps):
-        return False
-    return bool(abs(rates.measured - rates.before) >= np.deg2rad(dcfg.rate_step_min_dps))
-
-
-def step_candidates(scan: PreparedScan, rates: StepRates, cfg: OdometryConfig) -> list[RateStep]:
-    """The rate steps tried on `scan`: `DeskewConfig.rate_step_candidates` times spread evenly
-    over the sweep's part before the image time, the rate before them `rates.before` (held
-    since the previous image) and the one after chosen so that the yaw turned since the previous
-    image stays the measured one, the change bounded by `rate_step_max_change_dps`. (A step
-    after the image time leaves the measured yaw unchanged: only the next scan tells it.)"""
-    assert scan.twist is not None and scan.polar.timing is not None
-    timing, dcfg = scan.polar.timing, cfg.deskew
-    n = dcfg.rate_step_candidates
-    start = timing.first_row_s - scan.image_time_s
-    end = start + (scan.polar.n_azimuths - 1) * timing.row_period_s
-    first = max(min(start, end), -rates.interval_s)
-    times = first * (1.0 - (np.arange(n) + 0.5) / n)  # from `first` up to the image time
-    limit = np.deg2rad(dcfg.rate_step_max_change_dps)
-    turned = rates.measured * rates.interval_s
-    after = (turned - rates.before * (rates.interval_s + times)) / -times
-    changes = np.clip(after - rates.before, -limit, limit)
-    return [RateStep(float(t), float(c)) for t, c in zip(times, changes, strict=True)]
-
-
-def step_searched(
-    reference: PreparedScan,
-    scan: PreparedScan,
-    estimate: MotionEstimate,
-    rates: StepRates,
-    cfg: OdometryConfig,
-    register: Register,
-) -> tuple[PreparedScan, MotionEstimate]:
-    """`scan` and its registration against `reference`, or the scan de-skewed with the
-    strongest of `step_candidates` and its registration (seeded with `estimate`) when that
-    correlates more strongly by more than `DeskewConfig.rate_step_min_gain`. The caller
-    decides whether to search (`step_wanted`)."""
-    assert scan.twist is not None
-    twist = scan.twist.copy()
-    twist[2] = rates.before
-    best_scan, best = scan, estimate
-    for step in step_candidates(scan, rates, cfg):
-        stepped = PreparedScan(scan.polar, twist, cfg, step)
-        found = register(reference, stepped, cfg, hint=estimate.motion)
-        if found.ok and found.quality > best.quality:
-            best_scan, best = stepped, found
-    if best.quality <= (1.0 + cfg.deskew.rate_step_min_gain) * estimate.quality:
-        return scan, estimate
-    return best_scan, best

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import RateStep, motion_from_twist, twist_from_motion
+from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.phase_correlation import (
     PackedSpectrum,
     Peak,
@@ -116,13 +116,10 @@ class PreparedScan:
     Attributes:
         polar: the conditioned polar scan.
         twist: (3,) body velocity used for de-skewing (None: as measured).
-        rate_step: a step of the yaw rate within the sweep on top of `twist`, its time relative
-            to the image time (`odometry.deskew.RateStep`), or None.
         image_time_s: image time relative to the scan's reference time [s] (0 when de-skewing
             is disabled or the scan has no azimuth times).
         image_pose: (3,) T_reference_image, the image frame in the reference frame under
-            `twist` (zeros without a twist); a `rate_step` is not in it (`Odometry` moves poses
-            between image and reference time with its velocity, not with this).
+            `twist` (zeros without a twist).
         empty: nothing is left after conditioning (the scan cannot be registered).
         coarse_spectrum: packed spectrum (`odometry.packed`) of the unrotated coarse image.
         rotation_signature: Fourier-Mellin signature of the coarse image.
@@ -133,12 +130,10 @@ class PreparedScan:
         polar: PolarScan,
         twist: FloatArray | None,
         cfg: OdometryConfig,
-        rate_step: RateStep | None = None,
     ) -> None:
         self.polar = polar
         self.empty = not bool(polar.image.max() > 0)  # the image is non-negative
         self.twist = None if twist is None or polar.timing is None else np.asarray(twist, float)
-        self.rate_step = rate_step if self.twist is not None else None
         self.cfg = cfg
         mid = polar.mid_sweep_s
         use_mid = cfg.deskew.enabled and cfg.deskew.mid_sweep and mid is not None
@@ -157,9 +152,7 @@ class PreparedScan:
 
     def _render(self, level: CartesianLevel, rotation_rad: float) -> NDArray[np.float32]:
         """The scan's windowed image on `level`, turned by `rotation_rad`, at its image time."""
-        return render_cartesian(
-            self.polar, level, rotation_rad, self.twist, self.image_time_s, self.rate_step
-        )
+        return render_cartesian(self.polar, level, rotation_rad, self.twist, self.image_time_s)
 
     def _sample(
         self,
@@ -169,9 +162,7 @@ class PreparedScan:
         rotation_rad: float,
     ) -> NDArray[np.float32]:
         """The scan sampled at (x, y, range, bearing) points of its image frame."""
-        return sample_scan(
-            self.polar, *points, rotation_rad, self.twist, self.image_time_s, self.rate_step
-        )
+        return sample_scan(self.polar, *points, rotation_rad, self.twist, self.image_time_s)
 
     # The spectra are made on first use: a scan re-rendered only to be registered again with a
     # hint (or never used as a reference) needs none of them.

@@ -320,12 +320,6 @@ class DeskewConfig:
             deg/s rms on the simulator; docs/odometry_notes.md, stop 19).
         yaw_rate_search_min_gain: a searched de-skew replaces the kept one only when its peak
             quality is higher by more than this fraction.
-        yaw_rate_search_weak_fraction: the search also runs, at any interval, on a registration
-            whose peak quality is below this fraction of the previous scan's (a de-skew far off,
-            e.g. through a yaw-rate reversal between two scans; 0: never).
-        yaw_rate_search_weak_rounds: rounds of search for such a weak registration, each around
-            the yaw rate the last one moved to (the vertex of one round reaches three half-widths;
-            three rounds reach further but did worse at a rate nothing was tuned at, stop 15).
         keyframe_rate_change: at low frame rates (as above), a new keyframe is re-rendered at
             the mean yaw rate since the previous scan's image plus half the change of the rate
             between the two sweeps that their searches measured (against the previous scan, or
@@ -342,8 +336,6 @@ class DeskewConfig:
     yaw_rate_search_dps: float = 16.0
     yaw_rate_search_min_interval_s: float = 0.75
     yaw_rate_search_min_gain: float = 0.05
-    yaw_rate_search_weak_fraction: float = 0.5
-    yaw_rate_search_weak_rounds: int = 1
     yaw_rate_search_slow_rounds: int = 3
     keyframe_rate_change: bool = True
 
@@ -353,10 +345,6 @@ class DeskewConfig:
         checks.in_range("yaw_rate_search_dps", self.yaw_rate_search_dps, 0.0, 90.0)
         checks.non_negative("yaw_rate_search_min_interval_s", self.yaw_rate_search_min_interval_s)
         checks.non_negative("yaw_rate_search_min_gain", self.yaw_rate_search_min_gain)
-        checks.in_range(
-            "yaw_rate_search_weak_fraction", self.yaw_rate_search_weak_fraction, 0.0, 1.0
-        )
-        checks.at_least("yaw_rate_search_weak_rounds", self.yaw_rate_search_weak_rounds, 1)
         checks.at_least("yaw_rate_search_slow_rounds", self.yaw_rate_search_slow_rounds, 1)
 
 

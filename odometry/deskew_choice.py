@@ -112,15 +112,13 @@ def rate_searched(
     reference: ScanNode,
     rendered: Rendered,
     interval_s: float,
-    last_quality: float,
     cfg: OdometryConfig,
     register: Register = register_images,
 ) -> Rendered:
     """The scan and its estimate (`rendered`), or the scan de-skewed at a yaw rate searched by
-    peak quality where the search is wanted (`rate_search.rounds_wanted`: low frame rates,
-    a peak weak against the previous scan's `last_quality`)."""
+    peak quality where the search is wanted (`rate_search.rounds_wanted`: low frame rates)."""
     scan, estimate = rendered
-    rounds = rate_search.rounds_wanted(scan, estimate, interval_s, last_quality, cfg)
+    rounds = rate_search.rounds_wanted(scan, estimate, interval_s, cfg)
     if rounds == 0:
         return rendered
     return rate_search.searched(reference.scan, scan, estimate, cfg, register, rounds)

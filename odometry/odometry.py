@@ -423,10 +423,7 @@ class Odometry:
             reference, base, rendered, interval_s, velocity, cfg, register
         )
         if velocity is not None:
-            last = self._state.history[len(self._state.history) - 1].quality
-            rendered = deskew_choice.rate_searched(
-                reference, rendered, interval_s, last, cfg, register
-            )
+            rendered = deskew_choice.rate_searched(reference, rendered, interval_s, cfg, register)
         return rendered
 
     # -- helpers ------------------------------------------------------------------------------

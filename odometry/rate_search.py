@@ -1,4 +1,4 @@
-"""A new scan's de-skew yaw rate searched by correlation peak quality (low frame rates, weak peaks).
+"""A new scan's de-skew yaw rate searched by correlation peak quality at low frame rates.
 
 At 1 Hz the velocity a scan is de-skewed with is the mean over the second before it; through a
 yaw-rate step or reversal the sweep's own yaw rate can be tens of deg/s away. Rendered at a range
@@ -6,12 +6,8 @@ of yaw rates and registered against the same reference, the peak quality is high
 scan's de-skew matches the reference image's: it measures the sweep's yaw rate *relative to the
 reference's de-skew* (its error follows the reference's de-skew error), not the true one. Both
 images distorted alike register to a better relative motion than one distorted and one right
-(docs/odometry_notes.md, issue 10y), which is what this search buys. It runs where it can matter:
-at every scan of a low frame rate (a long interval between the image frames), and on a
-registration whose peak is far weaker than the previous scan's. The second is how a de-skew far
-off shows at any rate: at 2 Hz, leaving a U-turn through a reversal from +30 to -30 deg/s, the
-scan de-skewed at +28 deg/s correlated at a quarter of the previous peak and took an 8 deg wrong
-turn; searched, it registers within 1.5 deg (`DeskewConfig.yaw_rate_search_*`).
+(docs/odometry_notes.md, issue 10y), which is what this search buys. It runs at every scan of a
+low frame rate (a long interval between the image frames; `DeskewConfig.yaw_rate_search_*`).
 
 Because the search measures a rate relative to the reference's, a new keyframe at a low frame
 rate is not re-rendered at what the search found, nor at the mean yaw rate since the previous
@@ -46,30 +42,15 @@ MIN_VERTEX_OFFSET = 0.25
 
 
 def rounds_wanted(
-    scan: PreparedScan,
-    estimate: MotionEstimate,
-    interval_s: float,
-    last_quality: float,
-    cfg: OdometryConfig,
+    scan: PreparedScan, estimate: MotionEstimate, interval_s: float, cfg: OdometryConfig
 ) -> int:
-    """How many rounds of search `scan`'s de-skew yaw rate gets (0: none). Only a de-skewed,
-    registered scan (`estimate`) is searched, and only while the search is on; the larger of:
-
-    - its peak is weak, below `DeskewConfig.yaw_rate_search_weak_fraction` of the previous
-      scan's (`last_quality`; a de-skew far off, at any frame rate):
-      `yaw_rate_search_weak_rounds` rounds;
-    - its image frame is `interval_s` [s] after the last one, at least
-      `yaw_rate_search_min_interval_s` (a low frame rate): `yaw_rate_search_slow_rounds` rounds.
-    """
-    dcfg = cfg.deskew
-    if dcfg.yaw_rate_search_dps <= 0.0 or scan.twist is None or not estimate.ok:
+    """How many rounds of search `scan`'s de-skew yaw rate gets (0: none): a de-skewed,
+    registered scan (`estimate`) whose image frame is `interval_s` [s] after the last one, at
+    least `yaw_rate_search_min_interval_s` (a low frame rate), gets
+    `yaw_rate_search_slow_rounds` rounds while the search is on."""
+    if scan.twist is None or not estimate.ok or not searched_slowly(interval_s, cfg):
         return 0
-    rounds = 0
-    if estimate.quality < dcfg.yaw_rate_search_weak_fraction * last_quality:
-        rounds = dcfg.yaw_rate_search_weak_rounds
-    if searched_slowly(interval_s, cfg):
-        rounds = max(rounds, dcfg.yaw_rate_search_slow_rounds)
-    return rounds
+    return cfg.deskew.yaw_rate_search_slow_rounds
 
 
 def searched_slowly(interval_s: float, cfg: OdometryConfig) -> bool:

@@ -19,7 +19,7 @@ cores (the real drive at 4 Hz is most of it);
 simulated drives (the real drive always runs in full: its GT offset needs the speed profile).
 
 Usage: python scripts/ablate_odometry.py [--data-root ../shared/data] [--sim-root DIR]
-           [--real-stride 4 ...] [--sim tiny_u_turn ...] [--variants base,no_rate_step,...]
+           [--real-stride 4 ...] [--sim tiny_u_turn ...] [--variants base,no_trend,...]
            [--max-frames N] [--out FILE.md]
 """
 
@@ -104,15 +104,11 @@ def _keyframe_only() -> contextlib.AbstractContextManager[None]:
 
 VARIANTS = (
     Variant("base", "(nothing: the defaults)"),
-    Variant("no_rate_step", "rate-step search", {"deskew": {"rate_step_candidates": 0}}),
     Variant(
         "no_slow_search",
         "slow-rate yaw search",
         {"deskew": {"yaw_rate_search_min_interval_s": NEVER_S}},
         low_rate_only=True,
-    ),
-    Variant(
-        "no_weak_search", "weak-peak search", {"deskew": {"yaw_rate_search_weak_fraction": 0.0}}
     ),
     Variant(
         "no_keyframe_rate",

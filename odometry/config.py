@@ -304,28 +304,6 @@ class DeskewConfig:
             in the history (`Odometry.results`) is revised: its image pose moved to the
             reference time with the velocity interpolated between the ones measured before
             and after it (`odometry.reference_time`); what `register` returns is not changed.
-        yaw_rate_search_dps: in `Odometry`, the half-width [deg/s] of a search of a new scan's
-            de-skew yaw rate by correlation peak quality (`odometry.rate_search`; 0: off). Where it
-            runs, the scan is also de-skewed at its yaw rate minus and plus this, then at the
-            parabola's vertex through the three peak qualities (within three half-widths), each
-            registered seeded with the first estimate; the strongest keeps its de-skew. The peak
-            quality measures the sweep's yaw rate relative to the reference image's de-skew, so it
-            matches the two images' distortions rather than finding the true yaw rate
-            (docs/odometry_notes.md, issue 10y).
-        yaw_rate_search_min_interval_s: the search runs at every scan whose image frame is at
-            least this long [s] after the last one (a low frame rate: 1 Hz; at 4 Hz it is
-            0.25 s, at 2 Hz 0.5 s), `yaw_rate_search_slow_rounds` rounds ...
-        yaw_rate_search_slow_rounds: ... each round around the yaw rate the last one moved to
-            (with a reference de-skewed right, three rounds put the sweep's rate within 2-3
-            deg/s rms on the simulator; docs/odometry_notes.md, stop 19).
-        yaw_rate_search_min_gain: a searched de-skew replaces the kept one only when its peak
-            quality is higher by more than this fraction.
-        keyframe_rate_change: at low frame rates (as above), a new keyframe is re-rendered at
-            the mean yaw rate since the previous scan's image plus half the change of the rate
-            between the two sweeps that their searches measured (against the previous scan, or
-            against the keyframe both registered to; `odometry.rate_search.keyframe_yaw_rate`);
-            False: at the velocity as measured (the mean, with the yaw-rate trend), as at
-            higher rates.
     """
 
     enabled: bool = True
@@ -333,19 +311,10 @@ class DeskewConfig:
     mid_sweep: bool = True
     yaw_rate_extrapolation: float = 1.0
     revise_reference_pose: bool = True
-    yaw_rate_search_dps: float = 16.0
-    yaw_rate_search_min_interval_s: float = 0.75
-    yaw_rate_search_min_gain: float = 0.05
-    yaw_rate_search_slow_rounds: int = 3
-    keyframe_rate_change: bool = True
 
     def __post_init__(self) -> None:
         checks.at_least("iterations", self.iterations, 0)
         checks.finite("yaw_rate_extrapolation", self.yaw_rate_extrapolation)
-        checks.in_range("yaw_rate_search_dps", self.yaw_rate_search_dps, 0.0, 90.0)
-        checks.non_negative("yaw_rate_search_min_interval_s", self.yaw_rate_search_min_interval_s)
-        checks.non_negative("yaw_rate_search_min_gain", self.yaw_rate_search_min_gain)
-        checks.at_least("yaw_rate_search_slow_rounds", self.yaw_rate_search_slow_rounds, 1)
 
 
 def _coarse() -> LevelConfig:

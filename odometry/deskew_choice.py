@@ -8,9 +8,7 @@ it (a stronger correlation) or the registration itself measured a different velo
 - `with_trend`: the yaw-rate trend as a second hypothesis (a turn that goes on tightening);
 - `redeskewed`: the velocity the registration measures, when far from the rendered one (hard
   braking, a curvature step);
-- `rate_searched`: the yaw rate searched by peak quality (`odometry.rate_search`);
-- `refreshed`: a new keyframe re-rendered for the scans that will register against it, at low
-  frame rates at `keyframe_rate`.
+- `refreshed`: a new keyframe re-rendered for the scans that will register against it.
 
 Pure functions of the scan, its references (`ScanNode`) and the running `Velocity`; the
 registration is `registration.register_images`.
@@ -21,7 +19,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import rate_search
 from odometry.config import OdometryConfig
 from odometry.deskew import twist_from_motion
 from odometry.rate_search import Register
@@ -108,56 +105,13 @@ def redeskewed(
     return (again, redone) if redone.ok else rendered
 
 
-def rate_searched(
-    reference: ScanNode,
-    rendered: Rendered,
-    interval_s: float,
-    cfg: OdometryConfig,
-    register: Register = register_images,
-) -> Rendered:
-    """The scan and its estimate (`rendered`), or the scan de-skewed at a yaw rate searched by
-    peak quality where the search is wanted (`rate_search.rounds_wanted`: low frame rates)."""
-    scan, estimate = rendered
-    rounds = rate_search.rounds_wanted(scan, estimate, interval_s, cfg)
-    if rounds == 0:
-        return rendered
-    return rate_search.searched(reference.scan, scan, estimate, cfg, register, rounds)
-
-
-def keyframe_rate(
-    reference: ScanNode, base: ScanNode, scan: PreparedScan, velocity: Velocity | None
-) -> float | None:
-    """The de-skew yaw rate [rad/s] `scan` gets if it becomes a keyframe at a low frame rate
-    (`rate_search.keyframe_yaw_rate`): the velocity's yaw rate (the mean since `base`'s
-    image) plus half the change between `base`'s de-skew rate and the scan's. Both rates
-    must be relative to the same image's de-skew (the searches match distortions): `base`
-    is `reference`, or had its own rate searched against it. None otherwise, and when `base`
-    is a gap (its pose, hence the mean, is a prediction)."""
-    if velocity is None or scan.twist is None or base.scan.twist is None or base.gap:
-        return None
-    if base is not reference and base.rate_reference != reference.index:
-        return None
-    return rate_search.keyframe_yaw_rate(
-        float(velocity.twist[2]), float(scan.twist[2]), float(base.scan.twist[2])
-    )
-
-
-def refreshed(
-    scan: PreparedScan,
-    yaw_rate: float | None,
-    velocity: Velocity | None,
-    cfg: OdometryConfig,
-) -> PreparedScan:
-    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans),
-    at the yaw rate `yaw_rate` [rad/s] (`keyframe_rate`, low frame rates) when given; `scan`
-    itself where nothing would change."""
+def refreshed(scan: PreparedScan, velocity: Velocity | None, cfg: OdometryConfig) -> PreparedScan:
+    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans);
+    `scan` itself where nothing would change."""
     dcfg = cfg.deskew
     if velocity is None or not dcfg.enabled or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
     if scan.twist is not None and close_twists(new, scan.twist):
         return scan
-    if dcfg.keyframe_rate_change and yaw_rate is not None:
-        new = new.copy()
-        new[2] = yaw_rate
     return PreparedScan(scan.polar, new, cfg)

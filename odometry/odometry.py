@@ -20,9 +20,8 @@ the other side) is registered too and the stronger correlation decides which de-
 keeps: past motion cannot tell a turn that goes on tightening from a curvature step or a yaw-rate
 reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
 from the one its registration then measures (hard braking, a curvature step at a junction), the
-scan is re-rendered with the measured one and registered again; at low frame rates its yaw rate
-can also be searched by peak quality (`odometry.rate_search`, at low frame rates). Each of these
-choices is a pure function in `odometry.deskew_choice`.
+scan is re-rendered with the measured one and registered again. Each of these choices is a pure
+function in `odometry.deskew_choice`.
 
 Each registration is global (rotation over the full circle, translation over the whole coarse
 image; `registration.register_images`); the constant-velocity prediction is a search hint, never
@@ -45,10 +44,9 @@ import logging
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, deskew_choice, rate_search, recovery
+from odometry import OdometryError, deskew_choice, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.deskew_choice import Rendered
 from odometry.history import OdometryResult
 from odometry.preprocess import preprocess_polar
 from odometry.reference_time import (
@@ -313,22 +311,26 @@ class Odometry:
             base.scan, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
         image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
-        keyframe_rate, rate_reference = None, None
         # A motion faster than a vehicle moves, or across a gap that hid more than the
         # prediction allows, is no velocity: the one from before is kept (recovery.py).
         measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
-            scan, estimate = self._chosen_deskew(reference, base, (scan, estimate), interval_s)
+            scan, estimate = deskew_choice.redeskewed(
+                reference,
+                base,
+                (scan, estimate),
+                interval_s,
+                state.velocity,
+                self.config,
+                self._register_images,
+            )
             image_pose = compose(reference.image_pose, estimate.motion)
             before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)
             if before is not None and base is previous and not previous.gap:
                 self._revise(previous, before)
-            if rate_search.searched_slowly(interval_s, self.config):
-                rate_reference = reference.index
-                keyframe_rate = deskew_choice.keyframe_rate(reference, base, scan, state.velocity)
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
@@ -341,16 +343,13 @@ class Odometry:
             conversion_covariance=conversion_covariance(
                 estimate.covariance, change, scan.image_time_s, interval_s, self.config.quality
             ),
-            rate_reference=rate_reference,
         )
         covariance = self._factor_covariance(
             previous, reference, node, estimate, change, interval_s
         )
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = deskew_choice.refreshed(
-                node.scan, keyframe_rate, state.velocity, self.config
-            )
+            node.scan = deskew_choice.refreshed(node.scan, state.velocity, self.config)
             state.earlier_keyframes = recovery.remembered_keyframes(
                 state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
             )
@@ -358,9 +357,7 @@ class Odometry:
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = deskew_choice.refreshed(
-                    keyframe.scan, None, state.velocity, self.config
-                )
+                keyframe.scan = deskew_choice.refreshed(keyframe.scan, state.velocity, self.config)
         state.previous = state.last_registered = node
         return self._record(
             node,
@@ -410,21 +407,6 @@ class Odometry:
             velocity_change=change,
         )
         return in_previous_axes(previous.conversion_covariance, node.conversion_covariance)
-
-    def _chosen_deskew(
-        self, reference: ScanNode, base: ScanNode, rendered: Rendered, interval_s: float
-    ) -> Rendered:
-        """The scan's rendering and registration against `reference` after the de-skew steps
-        that follow a measured velocity (`deskew_choice`: re-de-skewed at the measured
-        velocity, the yaw rate searched); `base` is the scan the velocity
-        is measured from, `interval_s` [s] before."""
-        velocity, cfg, register = self._state.velocity, self.config, self._register_images
-        rendered = deskew_choice.redeskewed(
-            reference, base, rendered, interval_s, velocity, cfg, register
-        )
-        if velocity is not None:
-            rendered = deskew_choice.rate_searched(reference, rendered, interval_s, cfg, register)
-        return rendered
 
     # -- helpers ------------------------------------------------------------------------------
     def _register_images(

@@ -32,7 +32,6 @@ class ScanNode:
     """Covariance (own axes) that moving the image pose to the reference time adds to `pose`."""
     revision: RevisionTerms | None = None  # to recompute its factor covariance when revised
     revised_conversion: FloatArray | None = None  # `conversion_covariance` once revised
-    rate_reference: int | None = None  # the scan its yaw rate was searched against, slowly
 
     @property
     def settled_conversion(self) -> FloatArray:

@@ -4,19 +4,18 @@ Every variant runs the odometry (`radar_slam.pipeline.run_odometry`, the family 
 `radar-slam odometry` loads it) with one mechanism off, through its config key or, where it has
 none, a small override patched in for the run. Drives:
 
-- the RADIATE Edinburgh drive (real, GNSS/INS ground truth) at 4 Hz and at the `--real-stride`
-  strides; scored with the GT clock offset estimated from the odometry's speed profile (ATE,
-  end-point error, drift over 400-800 m segments);
-- the Oxford scans (real, GT radar odometry): ATE and RPE;
+- the RADIATE Edinburgh drive (real, GNSS/INS ground truth) at the `--real-stride` strides (4 Hz
+  and stride 4 by default); scored with the GT clock offset estimated from the odometry's speed
+  profile (ATE, end-point error, drift over 400-800 m segments; strided runs take the offset
+  estimated at 4 Hz when their own speed profile is too coarse for it);
+- the Oxford scans (real, GT radar odometry): ATE;
 - the `--sim` simulated drives at 4 Hz and stride 4: drift and the longest run of gaps.
 
 Each cell also gives the registrations per scan (`OdometryResult.registrations`, coarse and fine
-count as one). Mechanisms that only run at a low frame rate (an image interval of
-`DeskewConfig.yaw_rate_search_min_interval_s` or more) are run only on the strides where they act
-(their other cells equal the baseline). The defaults take about half an hour on two shared
-cores (the real drive at 4 Hz is most of it);
-`--variants` runs a subset, `--real-stride` and `--sim` choose the drives, `--max-frames` cuts the
-simulated drives (the real drive always runs in full: its GT offset needs the speed profile).
+count as one). With all variants the defaults take about half an hour on two shared cores (the
+real drive at 4 Hz is most of it); `--variants` runs a subset, `--real-stride` and `--sim` choose
+the drives, `--max-frames` cuts the simulated drives (the real drive always runs in full: its GT
+offset needs the speed profile).
 
 Usage: python scripts/ablate_odometry.py [--data-root ../shared/data] [--sim-root DIR]
            [--real-stride 4 ...] [--sim tiny_u_turn ...] [--variants base,no_trend,...]
@@ -41,6 +40,8 @@ import odometry.odometry as odometry_module
 import odometry.recovery as recovery
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
+from radar_slam.evaluation.metrics import evaluate
+from radar_slam.evaluation.time_offset import ground_truth_with_offset
 from radar_slam.pipeline import load_config, run_odometry
 
 logger = logging.getLogger("ablate_odometry")
@@ -51,10 +52,6 @@ OXFORD = "oxford/2019-01-10-14-36-48-partial"
 DEFAULT_REAL_STRIDES = (1, 4)
 DEFAULT_SIMS = ("tiny_u_turn", "tiny_roundabout")
 SIM_STRIDES = (1, 4)
-LOW_RATE_STRIDE = 4
-"""4 Hz data at this stride has image intervals long enough for the low-rate mechanisms."""
-NEVER_S = 1e9
-"""An image interval no drive reaches [s] (switches the low-rate yaw search off)."""
 
 
 @dataclass(frozen=True)
@@ -66,14 +63,12 @@ class Variant:
         mechanism: what is switched off, as the table says it.
         overrides: the `odometry:` config keys changed (nested mapping).
         patch: a context manager that switches off a mechanism without a key (None: none).
-        low_rate_only: the mechanism only acts at a low frame rate (run only at that stride).
     """
 
     name: str
     mechanism: str
     overrides: dict[str, Any] = field(default_factory=dict)
     patch: Callable[[], contextlib.AbstractContextManager[None]] | None = None
-    low_rate_only: bool = False
 
 
 @contextlib.contextmanager
@@ -104,18 +99,6 @@ def _keyframe_only() -> contextlib.AbstractContextManager[None]:
 
 VARIANTS = (
     Variant("base", "(nothing: the defaults)"),
-    Variant(
-        "no_slow_search",
-        "slow-rate yaw search",
-        {"deskew": {"yaw_rate_search_min_interval_s": NEVER_S}},
-        low_rate_only=True,
-    ),
-    Variant(
-        "no_keyframe_rate",
-        "keyframe yaw-rate formula",
-        {"deskew": {"keyframe_rate_change": False}},
-        low_rate_only=True,
-    ),
     Variant("no_trend", "yaw-trend hypothesis", {"deskew": {"yaw_rate_extrapolation": 0.0}}),
     Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
     Variant("no_implausible", "implausible but strongest wins", patch=_no_implausible_wins),
@@ -144,9 +127,11 @@ def _run(
     stride: int,
     variant: Variant,
     max_frames: int | None,
-    with_offset: bool,
+    offsets: dict[str, float] | None,
 ) -> Cell:
-    """Run `variant` over `spec` at `stride` and score it."""
+    """Run `variant` over `spec` at `stride` and score it; with `offsets` (the GT clock offset
+    [s] by sequence, filled here), through the GT clock offset: the run's own estimate, else the
+    one estimated on the same sequence before (at 1 Hz the speed profile is too coarse)."""
     family = spec.split("/")[0]
     config = load_config(family, overrides={"odometry": variant.overrides})
     sequence = strided(open_sequence(spec, data_root=root), stride)
@@ -159,8 +144,16 @@ def _run(
         run_ = run_ + 1 if result.gap else 0
         best = max(best, run_)
     metrics = run.metrics
-    if with_offset and run.gt_report is not None:
-        metrics = run.gt_report.offset_applied.get("odometry", metrics)
+    report = run.gt_report
+    if offsets is not None and report is not None:
+        if report.time_offset is not None:
+            offsets.setdefault(spec, report.time_offset.offset_s)
+            metrics = report.offset_applied.get("odometry", metrics)
+        elif spec in offsets and run.ground_truth is not None:
+            stamps = run.trajectory.timestamps_ns
+            shifted = ground_truth_with_offset(run.ground_truth, stamps, offsets[spec])
+            accuracy_m = 0.0 if report.source is None else report.source.accuracy_m
+            metrics = evaluate(run.trajectory, shifted, gt_accuracy_m=accuracy_m)
     if metrics is None:
         return Cell(longest_gap_run=best, registrations=float(np.mean(counts)))
     return Cell(
@@ -193,9 +186,7 @@ class Drive:
             return [f"{self.label} ATE m", "reg/scan"]
         return [f"{self.label} drift %", "gaps", "reg/scan"]
 
-    def cells(self, cell: Cell | None) -> list[str]:
-        if cell is None:
-            return ["= base"] + [""] * (len(self.header()) - 1)
+    def cells(self, cell: Cell) -> list[str]:
         reg = _fmt(cell.registrations)
         if self.kind == "real":
             return [_fmt(cell.ate_m), _fmt(cell.end_pct), _fmt(cell.drift_pct), reg]
@@ -230,16 +221,15 @@ def main() -> None:
     wanted = None if args.variants is None else set(args.variants.split(","))
     variants = [v for v in VARIANTS if wanted is None or v.name in wanted]
 
+    offsets: dict[str, float] = {}  # the GT clock offset of the real drive, from its 4 Hz run
     rows = []
     for variant in variants:
         start = time.perf_counter()
         row = [variant.mechanism]
         for drive in drives:
-            if variant.low_rate_only and drive.stride < LOW_RATE_STRIDE:
-                row += drive.cells(None)
-                continue
             frames = None if drive.kind == "real" else args.max_frames
-            cell = _run(drive.spec, drive.root, drive.stride, variant, frames, drive.kind == "real")
+            real = offsets if drive.kind == "real" else None
+            cell = _run(drive.spec, drive.root, drive.stride, variant, frames, real)
             row += drive.cells(cell)
         rows.append(row)
         logger.info("%s (%.0f s): %s", variant.name, time.perf_counter() - start, " | ".join(row))

@@ -258,10 +258,9 @@ class GeometricVerifier:
         span = query.twist_span_s
         if (
             not self.cfg.verification.yaw_rate_search
-            or refinement.deskew.yaw_rate_search_dps <= 0.0
             or prepared.twist is None
             or span is None
-            or span < refinement.deskew.yaw_rate_search_min_interval_s
+            or span < rate_search.LOW_RATE_INTERVAL_S
             or not estimate.ok
         ):
             return estimate

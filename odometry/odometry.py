@@ -34,7 +34,7 @@ the previous scan are tried (the reference becomes the keyframe); if all fail, t
 constant-velocity prediction, flagged (`ok=False`, `gap=True`, a large covariance), and the
 keyframe stays, so the next scan tries it first, again globally. A scan the motion model cannot
 describe stays a local error (`recovery`): a motion faster than a vehicle moves is no velocity,
-and a strong registration the kinematic limits reject beats a weaker one or a gap.
+but only the images fail a registration, never the kinematic limits.
 """
 
 from __future__ import annotations
@@ -276,8 +276,7 @@ class Odometry:
         if estimate.ok and recovery.agrees(estimate.motion, expected, self.config):
             return estimate
         seeded = self._register_images(reference.scan, scan, cfg, hint=expected)
-        strong = estimate.ok or estimate.implausible  # the images support it
-        if seeded.ok and (not strong or seeded.quality > estimate.quality):
+        if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
             logger.debug(
                 "scan against %d: seeded estimate %s (quality %.1f) beats %s (%.1f%s)",
                 reference.index,

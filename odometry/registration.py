@@ -79,8 +79,6 @@ class MotionEstimate:
         ok: True when every check passed; a caller must not use `motion` when False.
         reason: why the estimate failed ("" when ok).
         coarse_motion: (3,) the coarse level's estimate (for diagnostics).
-        implausible: failed only for being faster than the vehicle can move (every image check
-            passed): a caller may still prefer it to a weaker registration (`Odometry`).
     """
 
     motion: FloatArray
@@ -90,7 +88,6 @@ class MotionEstimate:
     ok: bool
     reason: str = ""
     coarse_motion: FloatArray = field(default_factory=lambda: np.zeros(3))
-    implausible: bool = False
 
     @property
     def dx(self) -> float:
@@ -292,12 +289,9 @@ def register_images(
         peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
     translation = _peak_to_metres(peak, cell)
     motion = np.array([translation[0], translation[1], yaw])
-    dt_s = (cur.timestamp_ns - ref.timestamp_ns) / NS_PER_S
+    # Only the images can fail a registration: a motion faster than a vehicle moves is still
+    # what they show (a prior is a hint, never a veto); it just never becomes a velocity.
     reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, cfg)
-    implausible = False
-    if not reason:
-        reason = kinematic_reason(twist_from_motion(motion, dt_s), cfg) if dt_s > 0 else ""
-        implausible = bool(reason)
     if reason:
         logger.debug("registration failed: %s (motion %s)", reason, motion)
     return MotionEstimate(
@@ -308,7 +302,6 @@ def register_images(
         ok=not reason,
         reason=reason,
         coarse_motion=coarse_motion,
-        implausible=implausible,
     )
 
 

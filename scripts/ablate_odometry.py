@@ -85,10 +85,6 @@ def _no_redeskew() -> contextlib.AbstractContextManager[None]:
     return _patched(deskew_choice, "redeskewed", lambda _r, _b, rendered, *_a, **_k: rendered)
 
 
-def _no_implausible_wins() -> contextlib.AbstractContextManager[None]:
-    return _patched(recovery, "preferred", lambda found, _implausible: found)
-
-
 def _no_deferred_first_images() -> contextlib.AbstractContextManager[None]:
     return _patched(odometry_module.Odometry, "_place_first_images", lambda *_a: None)
 
@@ -101,7 +97,6 @@ VARIANTS = (
     Variant("base", "(nothing: the defaults)"),
     Variant("no_trend", "yaw-trend hypothesis", {"deskew": {"yaw_rate_extrapolation": 0.0}}),
     Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
-    Variant("no_implausible", "implausible but strongest wins", patch=_no_implausible_wins),
     Variant("no_deferred", "deferred first images", patch=_no_deferred_first_images),
     Variant("no_fallback", "fallback chain (keyframe only)", patch=_keyframe_only),
     Variant("no_revision", "revised pose history", {"deskew": {"revise_reference_pose": False}}),

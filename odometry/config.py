@@ -197,9 +197,6 @@ class QualityConfig:
             times half a sweep; this multiple of the translation bend is added as a standard
             deviation [m] (above 1 because the measured change itself lags the true one).
         deskew_yaw_error_fraction: the same for the rotation bend [rad].
-        revised_velocity_lag_fraction: in `Odometry`, once a scan's pose is revised with the
-            velocity interpolated across it, the error of that velocity is taken as this
-            fraction of the change of the velocity's change, per axis.
         The translation term is on (1.25: it calibrates the translation of turning steps at
         1 Hz) and the rotation floor is 0.05 deg (it leaves room for the straight steps'
         rotation bias); the two rotation terms are off (0): 0.1 and 1.25 make the odometry's own
@@ -223,7 +220,6 @@ class QualityConfig:
     sigma_yaw_deg_per_deg: float = 0.0
     deskew_error_fraction: float = 1.25
     deskew_yaw_error_fraction: float = 0.0
-    revised_velocity_lag_fraction: float = 0.25
 
     def __post_init__(self) -> None:
         for name in (
@@ -248,7 +244,6 @@ class QualityConfig:
             "sigma_yaw_deg_per_deg",
             "deskew_error_fraction",
             "deskew_yaw_error_fraction",
-            "revised_velocity_lag_fraction",
         ):
             checks.non_negative(name, getattr(self, name))
 
@@ -300,17 +295,12 @@ class DeskewConfig:
             trend extrapolated to that time (0: constant velocity); the extrapolated change is
             bounded by the last measured change and never turns the yaw rate to the other side.
             It never enters the prediction a registration is compared with.
-        revise_reference_pose: in `Odometry`, once the next scan has registered, a scan's pose
-            in the history (`Odometry.results`) is revised: its image pose moved to the
-            reference time with the velocity interpolated between the ones measured before
-            and after it (`odometry.reference_time`); what `register` returns is not changed.
     """
 
     enabled: bool = True
     iterations: int = 1
     mid_sweep: bool = True
     yaw_rate_extrapolation: float = 1.0
-    revise_reference_pose: bool = True
 
     def __post_init__(self) -> None:
         checks.at_least("iterations", self.iterations, 0)

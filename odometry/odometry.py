@@ -10,10 +10,7 @@ Motion distortion: each scan is de-skewed with the running velocity to its mid-s
 image symmetrically instead of displacing it; registrations chain the image poses. A scan's pose
 at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
 measured between the last two image poses; that move's error does not accumulate, and its
-covariance is added to the registration's. Once the next scan has registered, the pose is revised
-with the velocity interpolated between the ones measured before and after it
-(`odometry.reference_time`): `register` returns the prompt result, `results` holds the revised ones
-(`odometry.history`). A new scan is de-skewed at constant velocity; while the
+covariance is added to the registration's. A new scan is de-skewed at constant velocity; while the
 yaw rate changes, the scan de-skewed with the yaw-rate trend (`DeskewConfig.yaw_rate_extrapolation`,
 bounded so that it never extrapolates more than the last measured change nor turns the yaw rate to
 the other side) is registered too and the stronger correlation decides which de-skew the scan
@@ -52,7 +49,6 @@ from odometry.preprocess import preprocess_polar
 from odometry.reference_time import (
     image_interval_s,
     image_time_ns,
-    interpolated_twist,
     move_centre_ns,
     pose_at_reference,
     seconds_to_ns,
@@ -60,14 +56,7 @@ from odometry.reference_time import (
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.state import OdometryState, ScanNode
-from odometry.uncertainty import (
-    RevisionTerms,
-    conversion_covariance,
-    factor_covariance,
-    revised_conversion_covariance,
-    revised_factor_covariance,
-    unseen_covariance,
-)
+from odometry.uncertainty import conversion_covariance, factor_covariance, unseen_covariance
 from odometry.velocity import (
     Velocity,
     bounded_twist,
@@ -98,14 +87,11 @@ class Odometry:
     # -- results ------------------------------------------------------------------------------
     @property
     def results(self) -> list[OdometryResult]:
-        """One result per registered scan, in order: each scan's pose revised once the next
-        scan has registered (the last one is as `register` returned it; see
-        `odometry.history`)."""
+        """One result per registered scan, in order (as `register` returned them)."""
         return self._state.history.results
 
     def result(self, index: int) -> OdometryResult:
-        """Scan `index`'s result as in `results` (revised once the next scan has registered),
-        without copying the list."""
+        """Scan `index`'s result as in `results`, without copying the list."""
         return self._state.history[index]
 
     @property
@@ -165,8 +151,8 @@ class Odometry:
 
     # -- the per-frame step -------------------------------------------------------------------
     def register(self, frame: Scan) -> OdometryResult:
-        """Register the next scan; returns its prompt result: its pose and how it was obtained,
-        `motion` from the previous scan's prompt pose (so that the returned results chain).
+        """Register the next scan; returns its result: its pose and how it was obtained,
+        `motion` from the previous scan's pose.
 
         Raises:
             OdometryError: the scan is malformed or not later than the previous one.
@@ -326,10 +312,7 @@ class Odometry:
                 self._register_images,
             )
             image_pose = compose(reference.image_pose, estimate.motion)
-            before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)
-            if before is not None and base is previous and not previous.gap:
-                self._revise(previous, before)
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
@@ -343,9 +326,7 @@ class Odometry:
                 estimate.covariance, change, scan.image_time_s, interval_s, self.config.quality
             ),
         )
-        covariance = self._factor_covariance(
-            previous, reference, node, estimate, change, interval_s
-        )
+        covariance = self._factor_covariance(previous, reference, node, estimate, change)
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
             node.scan = deskew_choice.refreshed(node.scan, state.velocity, self.config)
@@ -376,36 +357,20 @@ class Odometry:
         node: ScanNode,
         estimate: MotionEstimate,
         change: FloatArray,
-        interval_s: float,
     ) -> FloatArray:
-        """The covariance of `node`'s result (in `previous`'s axes); keeps on the node what its
-        revision will need (`node.revision`)."""
+        """The covariance of `node`'s result (in `previous`'s axes)."""
         registration_covariance = estimate.covariance + unseen_covariance(
             estimate.motion, change, node.scan, self.config.quality
         )
-        turn = float(between(previous.pose, reference.pose)[2])
-
-        def in_previous_axes(previous_conversion: FloatArray, own: FloatArray) -> FloatArray:
-            return factor_covariance(
-                registration_covariance,
-                reference.pose,
-                reference.image_pose,
-                node.pose,
-                own,
-                turn,
-                previous_conversion,
-            )
-
-        node.revision = RevisionTerms(
-            # What the revision keeps: all but the scan's own conversion (`_revise` adds it).
-            fixed=in_previous_axes(previous.settled_conversion, np.zeros((3, 3))),
-            conversion_angle=float(between(previous.pose, node.pose)[2]),
-            registration_covariance=estimate.covariance,
-            image_time_s=node.scan.image_time_s,
-            interval_s=interval_s,
-            velocity_change=change,
+        return factor_covariance(
+            registration_covariance,
+            reference.pose,
+            reference.image_pose,
+            node.pose,
+            node.conversion_covariance,
+            float(between(previous.pose, reference.pose)[2]),
+            previous.conversion_covariance,
         )
-        return in_previous_axes(previous.conversion_covariance, node.conversion_covariance)
 
     # -- helpers ------------------------------------------------------------------------------
     def _register_images(
@@ -459,27 +424,6 @@ class Odometry:
         assert self._state.velocity is not None
         twist = self._velocity_at(move_centre_ns(scan))
         return pose_at_reference(image_pose, twist, scan.image_time_s)
-
-    def _revise(self, node: ScanNode, before: Velocity) -> None:
-        """Revise the previous scan's pose in the history now that the velocity after its image
-        time is measured too (`before` was measured up to it; see `odometry.reference_time`)."""
-        after = self._state.velocity
-        if not self.config.deskew.revise_reference_pose or after is None or node.index == 0:
-            return
-        twist = bounded_twist(
-            interpolated_twist(before, after, move_centre_ns(node.scan)), self.config
-        )
-        covariance = None
-        if node.revision is not None:
-            node.revised_conversion = revised_conversion_covariance(
-                node.revision, after.twist - before.twist, self.config.quality
-            )
-            covariance = revised_factor_covariance(node.revision, node.revised_conversion)
-        self._state.history.revise(
-            node.index,
-            pose_at_reference(node.image_pose, twist, node.scan.image_time_s),
-            covariance,
-        )
 
     def _needs_keyframe(self, estimate: MotionEstimate, keyframe: ScanNode) -> bool:
         kcfg = self.config.keyframe

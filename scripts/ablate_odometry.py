@@ -99,7 +99,6 @@ VARIANTS = (
     Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
     Variant("no_deferred", "deferred first images", patch=_no_deferred_first_images),
     Variant("no_fallback", "fallback chain (keyframe only)", patch=_keyframe_only),
-    Variant("no_revision", "revised pose history", {"deskew": {"revise_reference_pose": False}}),
     Variant("one_refine", "second Fourier-Mellin refinement", {"rotation": {"refine_passes": 1}}),
     Variant("no_refine", "Fourier-Mellin refinement", {"rotation": {"refine": False}}),
 )

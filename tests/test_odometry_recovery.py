@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from test_odometry_sim import render
 
 from odometry import OdometryConfig, estimate_motion
-from odometry.config import DeskewConfig, QualityConfig
+from odometry.config import QualityConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry, OdometryResult
 from odometry.recovery import plausible_twist
@@ -56,11 +56,9 @@ CALIBRATED = OdometryConfig(
     quality=QualityConfig(
         sigma_yaw_deg_per_deg=0.1, deskew_error_fraction=1.25, deskew_yaw_error_fraction=1.25
     ),
-    deskew=DeskewConfig(revise_reference_pose=False),
 )
 """The covariance terms that make the odometry's own covariances consistent (the two rotation
-terms are off by default), checked on the prompt results they are computed for (what a pose
-graph takes; `results` then holds them unrevised)."""
+terms are off by default)."""
 NEES_RANGE = (1.0, 6.0)
 """Mean normalised squared error of the scan-to-reference motions in hard driving at 4 Hz (3 when
 calibrated; 36-52 before the covariances grew with the turn and the velocity's change, see

@@ -71,73 +71,6 @@ class LevelConfig:
 
 
 @dataclass(frozen=True)
-class RotationConfig:
-    """Fourier-Mellin rotation: polar resampling of the coarse image's magnitude spectrum.
-
-    Attributes:
-        n_angles: samples of the spectrum's angle over [0, pi) (resolution pi / n_angles).
-        n_radii: samples of the spectrum's radius.
-        min_frequency: lowest spectral radius used, as a fraction of Nyquist (skips the
-            window-dominated low frequencies).
-        max_frequency: highest spectral radius used, as a fraction of Nyquist.
-        log_radius: sample the radius logarithmically (log-polar, PhaRaO) instead of linearly.
-        smoothing_bins: Gaussian width [angle bins] of the correlation peak (low-pass on the
-            cross-power spectrum), for a smooth peak and a sub-bin fit.
-        refine: after the coarse translation, refine the rotation by angular correlation of
-            both scans resampled on a polar grid about the reference sensor (translation
-            removed): Fourier-Mellin alone is biased toward zero by the fixed pixel grid.
-        refine_n_angles: angular samples of that polar grid over a full turn.
-        refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
-        refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
-        refine_passes: at most this many refinements in a row; each after the first
-            re-estimates the coarse translation at the refined yaw (near the previous one)
-            first. The first coarse translation is made at the Fourier-Mellin yaw, which locks
-            toward zero for rotations below about a degree; its error leaks into a single
-            refinement as a rotation error proportional to the rotation (see
-            `scripts/diagnose_rotation_bias.py`). 2 removes that error (the default since
-            stop 14, when the drives began to gain from it: docs/odometry_notes.md).
-        refine_repeat_min_deg: the refinement is repeated only while its last correction was
-            larger than this [deg] (the translation was made at a yaw off by that much).
-    """
-
-    n_angles: int = 720
-    n_radii: int = 96
-    min_frequency: float = 0.05
-    max_frequency: float = 0.9
-    log_radius: bool = False
-    smoothing_bins: float = 1.0
-    refine: bool = True
-    refine_n_angles: int = 720
-    refine_min_range_m: float = 5.0
-    refine_max_range_m: float = 80.0
-    refine_range_step_m: float = 0.5
-    refine_smoothing_bins: float = 2.0
-    refine_passes: int = 2
-    refine_repeat_min_deg: float = 0.05
-
-    def __post_init__(self) -> None:
-        checks.at_least("n_angles", self.n_angles, 2)
-        checks.at_least("n_radii", self.n_radii, 2)
-        checks.in_range("min_frequency", self.min_frequency, 0.0, 1.0)
-        checks.in_range("max_frequency", self.max_frequency, 0.0, 1.0, open_low=True)
-        checks.less("min_frequency", self.min_frequency, "max_frequency", self.max_frequency)
-        checks.non_negative("smoothing_bins", self.smoothing_bins)
-        checks.at_least("refine_n_angles", self.refine_n_angles, 2)
-        checks.non_negative("refine_min_range_m", self.refine_min_range_m)
-        checks.positive("refine_max_range_m", self.refine_max_range_m)
-        checks.less(
-            "refine_min_range_m",
-            self.refine_min_range_m,
-            "refine_max_range_m",
-            self.refine_max_range_m,
-        )
-        checks.positive("refine_range_step_m", self.refine_range_step_m)
-        checks.non_negative("refine_smoothing_bins", self.refine_smoothing_bins)
-        checks.at_least("refine_passes", self.refine_passes, 1)
-        checks.non_negative("refine_repeat_min_deg", self.refine_repeat_min_deg)
-
-
-@dataclass(frozen=True)
 class TranslationConfig:
     """Phase correlation of de-rotated Cartesian images.
 
@@ -322,7 +255,6 @@ class OdometryConfig:
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     coarse: LevelConfig = field(default_factory=_coarse)
     fine: LevelConfig = field(default_factory=_fine)
-    rotation: RotationConfig = field(default_factory=RotationConfig)
     translation: TranslationConfig = field(default_factory=TranslationConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)

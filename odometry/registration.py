@@ -49,6 +49,7 @@ from odometry.preprocess import (
     sample_scan,
 )
 from odometry.rotation import (
+    ROTATION,
     RotationEstimate,
     Signature,
     angular_spectrum,
@@ -171,7 +172,7 @@ class PreparedScan:
     @functools.cached_property
     def rotation_signature(self) -> Signature:
         """Fourier-Mellin signature of the coarse image."""
-        return signature(self.coarse_spectrum, self.cfg.rotation)
+        return signature(self.coarse_spectrum, ROTATION)
 
     @functools.cached_property
     def fine_spectrum(self) -> PackedSpectrum:
@@ -181,7 +182,7 @@ class PreparedScan:
     @functools.cached_property
     def refine_image(self) -> NDArray[np.float32]:
         """The scan on the rotation-refinement polar grid (made when the scan is a reference)."""
-        grid = polar_grid(self.cfg.rotation)
+        grid = polar_grid(ROTATION)
         return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
 
     @functools.cached_property
@@ -217,9 +218,9 @@ def _residual_rotation(
 ) -> RotationEstimate:
     """Rotation left after rendering `cur` through (translation, yaw) onto the polar grid about
     `ref`'s sensor."""
-    grid = polar_grid(cfg.rotation)
+    grid = polar_grid(ROTATION)
     moved = cur._sample(grid.shifted(float(translation[0]), float(translation[1])), yaw)
-    return refine_rotation_against(ref.refine_spectrum, moved, cfg.rotation)
+    return refine_rotation_against(ref.refine_spectrum, moved, ROTATION)
 
 
 def register(
@@ -266,17 +267,17 @@ def register_images(
     """
     coarse_level = cartesian_level(cfg.coarse)
     if hint is None:
-        rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, cfg.rotation)
+        rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, ROTATION)
         coarse_peak, yaw = _coarse_translation(ref, cur, rotation.angle_rad, cfg, None)
     else:
         rotation = RotationEstimate(angle_rad=float(hint[2]), sigma_rad=0.0, quality=np.inf)
         coarse_peak, yaw = _coarse_translation(ref, cur, float(hint[2]), cfg, hint[:2])
     t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
     coarse_motion = np.array([t_coarse[0], t_coarse[1], yaw])
-    if cfg.rotation.refine:
-        for refinement in range(cfg.rotation.refine_passes):
+    if ROTATION.refine:
+        for refinement in range(ROTATION.refine_passes):
             if refinement:
-                if abs(rotation.angle_rad) <= np.deg2rad(cfg.rotation.refine_repeat_min_deg):
+                if abs(rotation.angle_rad) <= np.deg2rad(ROTATION.refine_repeat_min_deg):
                     break  # converged: the translation was made at (about) this yaw
                 # The translation again at the refined yaw (near the last one), then the rotation.
                 coarse_peak, yaw = _coarse_translation(ref, cur, yaw, cfg, t_coarse)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import logging
 import time
 from collections.abc import Callable, Iterator
@@ -38,6 +39,8 @@ import numpy as np
 import odometry.deskew_choice as deskew_choice
 import odometry.odometry as odometry_module
 import odometry.recovery as recovery
+import odometry.registration as registration
+from odometry.rotation import ROTATION
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import evaluate
@@ -89,6 +92,14 @@ def _no_deferred_first_images() -> contextlib.AbstractContextManager[None]:
     return _patched(odometry_module.Odometry, "_place_first_images", lambda *_a: None)
 
 
+def _one_refinement() -> contextlib.AbstractContextManager[None]:
+    return _patched(registration, "ROTATION", dataclasses.replace(ROTATION, refine_passes=1))
+
+
+def _no_refinement() -> contextlib.AbstractContextManager[None]:
+    return _patched(registration, "ROTATION", dataclasses.replace(ROTATION, refine=False))
+
+
 def _keyframe_only() -> contextlib.AbstractContextManager[None]:
     return _patched(recovery, "fallback_references", lambda keyframe, *_a: [keyframe])
 
@@ -99,8 +110,8 @@ VARIANTS = (
     Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
     Variant("no_deferred", "deferred first images", patch=_no_deferred_first_images),
     Variant("no_fallback", "fallback chain (keyframe only)", patch=_keyframe_only),
-    Variant("one_refine", "second Fourier-Mellin refinement", {"rotation": {"refine_passes": 1}}),
-    Variant("no_refine", "Fourier-Mellin refinement", {"rotation": {"refine": False}}),
+    Variant("one_refine", "second Fourier-Mellin refinement", patch=_one_refinement),
+    Variant("no_refine", "Fourier-Mellin refinement", patch=_no_refinement),
 )
 
 

@@ -51,9 +51,10 @@ from point_scenes import (  # noqa: E402  (the test helper folder is put on the 
     static_poses,
 )
 
-from odometry.config import DeskewConfig, OdometryConfig, RotationConfig  # noqa: E402
+from odometry import registration  # noqa: E402
+from odometry.config import DeskewConfig, OdometryConfig  # noqa: E402
 from odometry.deskew import motion_from_twist, sampling_maps  # noqa: E402
-from odometry.registration import estimate_motion  # noqa: E402
+from odometry.registration import MotionEstimate, estimate_motion  # noqa: E402
 from odometry.scan import Scan  # noqa: E402
 from radar_slam.datasets.mulran import column_azimuths_rad  # noqa: E402
 from radar_slam.sim.generate import Scene, build_scene  # noqa: E402
@@ -188,11 +189,14 @@ def _scan(targets: FloatArray, pose: list[float], end_ns: int, size: dict[str, f
     return scan_frame(polar, end_ns, False, size.get("bin_m", BIN_M))
 
 
-def _cfg(**rotation: object) -> OdometryConfig:
-    return OdometryConfig(
-        deskew=DeskewConfig(enabled=False),
-        rotation=RotationConfig(**rotation),  # type: ignore[arg-type]
-    )
+def _estimate(ref: Scan, cur: Scan, passes: int) -> MotionEstimate:
+    """`estimate_motion` without de-skew, the rotation refined `passes` times."""
+    original = registration.ROTATION
+    registration.ROTATION = dataclasses.replace(original, refine_passes=passes)
+    try:
+        return estimate_motion(ref, cur, OdometryConfig(deskew=DeskewConfig(enabled=False)))
+    finally:
+        registration.ROTATION = original
 
 
 MULRAN_BIN_M = 0.05952
@@ -204,7 +208,7 @@ def rotation(n_scenes: int, full: bool) -> None:
     MulRan's 3360 bins of 0.0595 m instead of 500 of 0.2 m."""
     size = {"n_bins": MULRAN_N_BINS, "bin_m": MULRAN_BIN_M} if full else {}
     angles_mdeg = (0.0, 100.0, 225.0, 450.0, 675.0, 900.0, 1125.0, 1800.0)
-    configs = {"1 pass": _cfg(refine_passes=1), "2 passes": _cfg(refine_passes=2)}
+    configs = {"1 pass": 1, "2 passes": 2}
     print("translation [m] | rotation [mdeg] | coarse yaw [mdeg] | refined error [mdeg], mean"
           " +- s.e.: " + ", ".join(configs))  # fmt: skip
     scenes = [point_scene(np.random.default_rng(seed)) for seed in range(n_scenes)]
@@ -216,8 +220,8 @@ def rotation(n_scenes: int, full: bool) -> None:
             coarse: list[float] = []
             refined: dict[str, list[float]] = {name: [] for name in configs}
             for ref, cur in zip(refs, curs, strict=True):
-                for name, cfg in configs.items():
-                    estimate = estimate_motion(ref, cur, cfg)
+                for name, passes in configs.items():
+                    estimate = _estimate(ref, cur, passes)
                     refined[name].append(np.degrees(estimate.dyaw) * 1e3 - angle)
                 coarse.append(np.degrees(estimate.coarse_motion[2]) * 1e3)
             cells = " | ".join(_mean_se(np.array(v)) for v in refined.values())

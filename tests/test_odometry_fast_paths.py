@@ -41,6 +41,7 @@ from odometry.preprocess import (
 )
 from odometry.registration import PreparedScan, _residual_rotation
 from odometry.rotation import (
+    ROTATION,
     _centred_log_magnitude,
     angular_spectrum,
     polar_grid,
@@ -69,7 +70,7 @@ def _random_map_arguments(rng: np.random.Generator, deskew: bool) -> dict:
 def test_sampling_map_kernel_equals_numpy_reference(deskew: bool) -> None:
     rng = np.random.default_rng(11)
     level = cartesian_level(LevelConfig(cell_m=0.5, size_px=96))
-    grid = polar_grid(OdometryConfig().rotation)
+    grid = polar_grid(ROTATION)
     point_sets = [
         (level.x_m, level.y_m, level.range_m, level.bearing_rad),
         grid.shifted(3.2, -1.1),  # the refinement grid seen from a moved sensor
@@ -146,13 +147,13 @@ def test_prepared_scan_caches_equal_fresh_computations() -> None:
     scan = PreparedScan(polar, twist, cfg)
     coarse = render_cartesian(polar, cartesian_level(cfg.coarse), 0.0, twist, scan.image_time_s)
     np.testing.assert_array_equal(scan.coarse_spectrum, forward(coarse))
-    grid = polar_grid(cfg.rotation)
+    grid = polar_grid(ROTATION)
     np.testing.assert_array_equal(scan.refine_spectrum, angular_spectrum(scan.refine_image))
     # The cached reference spectrum gives the same residual rotation as the images.
     moving = PreparedScan(preprocess_polar(_blob_scan(3, 250_000_000), cfg.preprocess), twist, cfg)
     cached = _residual_rotation(scan, moving, np.array([1.5, 0.2]), 0.05, cfg)
     points = grid.shifted(1.5, 0.2)
-    fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), cfg.rotation)
+    fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), ROTATION)
     assert cached == fresh
 
 

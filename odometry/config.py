@@ -71,36 +71,6 @@ class LevelConfig:
 
 
 @dataclass(frozen=True)
-class TranslationConfig:
-    """Phase correlation of de-rotated Cartesian images.
-
-    Attributes:
-        smoothing_px: Gaussian width [pixels] of the correlation peak (low-pass on the normalised
-            cross-power spectrum) so that a 3 x 3 Gaussian fit locates it to a fraction of a pixel.
-        whitening: exponent of the spectral normalisation (1 is pure phase correlation, 0 plain
-            cross-correlation).
-        fine_search_px: the fine peak is searched within this many fine pixels of the coarse
-            estimate.
-        use_fine: run the fine (near range, full resolution) level after the coarse one.
-        hint_radius_m: a registration seeded with a hint (a motion model's prediction) searches
-            the coarse translation peak within this distance of the hint's translation [m] (the
-            error of a constant-velocity prediction at 1 Hz: a few m/s^2 of braking or
-            acceleration over the interval).
-    """
-
-    smoothing_px: float = 1.0
-    whitening: float = 1.0
-    fine_search_px: int = 6
-    use_fine: bool = True
-    hint_radius_m: float = 4.0
-
-    def __post_init__(self) -> None:
-        checks.non_negative("smoothing_px", self.smoothing_px)
-        checks.in_range("whitening", self.whitening, 0.0, 1.0)
-        checks.at_least("fine_search_px", self.fine_search_px, 1)
-
-
-@dataclass(frozen=True)
 class QualityConfig:
     """When an estimate counts as failed, and how its covariance is scaled.
 
@@ -255,7 +225,6 @@ class OdometryConfig:
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     coarse: LevelConfig = field(default_factory=_coarse)
     fine: LevelConfig = field(default_factory=_fine)
-    translation: TranslationConfig = field(default_factory=TranslationConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
     deskew: DeskewConfig = field(default_factory=DeskewConfig)

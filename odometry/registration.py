@@ -67,6 +67,21 @@ logger = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 
 
+PEAK_SMOOTHING_PX = 1.0
+"""Gaussian width [pixels] of a translation correlation peak (low-pass on the normalised
+cross-power spectrum), so that a 3 x 3 Gaussian fit locates it to a fraction of a pixel."""
+WHITENING = 1.0
+"""Exponent of the spectral normalisation: 1 is pure phase correlation (0 would be plain
+cross-correlation, dominated by the brightest returns)."""
+FINE_SEARCH_PX = 6
+"""The fine peak is searched within this many fine pixels of the coarse estimate (the coarse
+peak's error is under a coarse pixel, about three fine ones)."""
+HINT_RADIUS_M = 4.0
+"""A registration seeded with a hint searches the coarse translation peak within this distance of
+the hint's translation [m]: the error of a constant-velocity prediction at 1 Hz (a few m/s^2 of
+braking or acceleration over the interval)."""
+
+
 @dataclass(frozen=True)
 class MotionEstimate:
     """Relative motion between two scans.
@@ -261,7 +276,7 @@ def register_images(
     pi, the half turn resolved by the stronger translation peak), translation anywhere in the
     coarse image. With `hint` (3,) (dx, dy [m], dyaw [rad], e.g. a motion model's prediction)
     the registration is seeded with it: the rotation starts from the hint's yaw and the coarse
-    translation peak is searched within `cfg.translation.hint_radius_m` of the hint's
+    translation peak is searched within `HINT_RADIUS_M` of the hint's
     translation; the refinements that follow are the same. The caller compares the two by their
     peak quality (a hint narrows the search, it never overrules the images).
     """
@@ -286,8 +301,7 @@ def register_images(
             yaw = float(wrap_angle(yaw + rotation.angle_rad))
 
     peak, cell = coarse_peak, coarse_level.cell_m
-    if cfg.translation.use_fine:
-        peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
+    peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
     translation = _peak_to_metres(peak, cell)
     motion = np.array([translation[0], translation[1], yaw])
     # Only the images can fail a registration: a motion faster than a vehicle moves is still
@@ -319,7 +333,6 @@ def _coarse_translation(
     Fourier-Mellin rotation is known modulo pi); with `hint_xy` (2,) [m] only `angle_rad` is
     tried and the peak is searched within `hint_radius_m` of that translation."""
     level = cartesian_level(cfg.coarse)
-    tcfg = cfg.translation
     image = cur._render(level, angle_rad)
     spectrum = forward(image)
     shape = image.shape
@@ -329,13 +342,13 @@ def _coarse_translation(
         if hint_xy is None
         else (float(hint_xy[0]) / level.cell_m, float(hint_xy[1]) / level.cell_m)
     )
-    radius = None if hint_xy is None else tcfg.hint_radius_m / level.cell_m
+    radius = None if hint_xy is None else HINT_RADIUS_M / level.cell_m
     hypotheses = []
     for turn in turns:
         surface = correlate(
-            ref.coarse_spectrum, spectrum, shape, tcfg.smoothing_px, tcfg.whitening, turn != 0.0
+            ref.coarse_spectrum, spectrum, shape, PEAK_SMOOTHING_PX, WHITENING, turn != 0.0
         )
-        hypotheses.append((locate_peak(surface, tcfg.smoothing_px, centre, radius), turn))
+        hypotheses.append((locate_peak(surface, PEAK_SMOOTHING_PX, centre, radius), turn))
     peak, turn = max(hypotheses, key=lambda h: h[0].quality)
     return peak, float(wrap_angle(angle_rad + turn))
 
@@ -344,15 +357,12 @@ def _fine_translation(
     ref: PreparedScan, cur: PreparedScan, t_coarse: FloatArray, yaw: float, cfg: OdometryConfig
 ) -> tuple[Peak, float]:
     """The fine level's translation peak near the coarse estimate, and the fine cell [m]."""
-    tcfg = cfg.translation
     level = cartesian_level(cfg.fine)
     fine = cur._render(level, yaw)
     centre = t_coarse / level.cell_m
-    surface = correlate(
-        ref.fine_spectrum, forward(fine), fine.shape, tcfg.smoothing_px, tcfg.whitening
-    )
+    surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX, WHITENING)
     peak = locate_peak(
-        surface, tcfg.smoothing_px, (float(centre[0]), float(centre[1])), tcfg.fine_search_px
+        surface, PEAK_SMOOTHING_PX, (float(centre[0]), float(centre[1])), FINE_SEARCH_PX
     )
     return peak, level.cell_m
 

@@ -80,7 +80,6 @@ CONFIG_CASES = [
     ),
     ("loop_closure: {raplace: {pose: {n_theta: 5}}}", "loop_closure.raplace.pose.n_theta"),
     ("odometry: {rotation: {n_angles: 720}}", "unknown key 'rotation'"),
-    ("odometry: {translation: {whitening: 2}}", "odometry.translation.whitening"),
     ("odometry: {quality: {sigma_scale: 0}}", "odometry.quality.sigma_scale"),
     ("odometry: {deskew: {iterations: -1}}", "odometry.deskew.iterations"),
     ("graph: {loop_kernel: tukey}", "graph.loop_kernel"),

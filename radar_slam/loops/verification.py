@@ -321,7 +321,7 @@ class GeometricVerifier:
         """The phase-correlation half of the verification (b and c of the module docstring)
         from an initial T_query_match (3,): the sinogram estimate (`__call__`), or a prediction
         (`initial_quality` NaN; `radar_slam.loops.tracking`), which also seeds the registration
-        (its coarse peak searched within `refinement.translation.hint_radius_m` of the
+        (its coarse peak searched within `odometry.registration.HINT_RADIUS_M` of the
         prediction). Never raises for a bad match."""
         vcfg = self.cfg.verification
         nan3 = np.full(3, np.nan)

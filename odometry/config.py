@@ -29,7 +29,6 @@ class PreprocessConfig:
             that do not move with the vehicle).
         noise_floor_sigmas: per azimuth, subtract mean + this many standard deviations of the
             row (a CFAR-like noise floor); negative values disable the floor.
-        gamma: the remaining intensities are raised to this power (1 keeps them linear).
     """
 
     bin_size_m: float = 0.2
@@ -37,7 +36,6 @@ class PreprocessConfig:
     max_range_m: float = 150.0
     ring_noise_removal: bool = True
     noise_floor_sigmas: float = 0.0
-    gamma: float = 1.0
 
     def __post_init__(self) -> None:
         checks.positive("bin_size_m", self.bin_size_m)
@@ -45,7 +43,6 @@ class PreprocessConfig:
         checks.positive("max_range_m", self.max_range_m)
         checks.less("min_range_m", self.min_range_m, "max_range_m", self.max_range_m)
         checks.finite("noise_floor_sigmas", self.noise_floor_sigmas)
-        checks.positive("gamma", self.gamma)
 
 
 @dataclass(frozen=True)
@@ -76,7 +73,6 @@ class QualityConfig:
 
     Attributes:
         min_peak_quality: minimum peak-to-noise ratio of the translation and rotation peaks.
-        max_coarse_fine_disagreement_m: coarse and fine translations may differ by this much [m].
         max_speed_mps: a motion faster than this is implausible [m/s].
         max_yaw_rate_dps: a rotation faster than this is implausible [deg/s].
         max_prediction_error_m: in `Odometry`, an estimate farther than this from the
@@ -86,9 +82,6 @@ class QualityConfig:
         min_sigma_xy_m: floor of the translation standard deviation [m].
         min_sigma_yaw_deg: floor of the rotation standard deviation [deg].
         sigma_scale: multiplies the peak-derived standard deviations (calibration factor).
-        gap_sigma_xy_m: standard deviation given to a constant-velocity prediction that covers a
-            failed registration [m].
-        gap_sigma_yaw_deg: the same for its rotation [deg].
         velocity_lag_fraction: in `Odometry`, the error of the velocity that moves a pose from
             mid-sweep to the scan's reference time is taken as this fraction of the velocity's
             last change (it lags an accelerating or turning vehicle), per axis.
@@ -109,7 +102,6 @@ class QualityConfig:
     """
 
     min_peak_quality: float = 6.0
-    max_coarse_fine_disagreement_m: float = 1.0
     max_speed_mps: float = 45.0
     max_yaw_rate_dps: float = 120.0
     max_prediction_error_m: float = 1.5
@@ -117,8 +109,6 @@ class QualityConfig:
     min_sigma_xy_m: float = 0.01
     min_sigma_yaw_deg: float = 0.05
     sigma_scale: float = 3.0
-    gap_sigma_xy_m: float = 1.0
-    gap_sigma_yaw_deg: float = 5.0
     velocity_lag_fraction: float = 0.25
     sigma_yaw_deg_per_deg: float = 0.0
     deskew_error_fraction: float = 1.25
@@ -127,7 +117,6 @@ class QualityConfig:
     def __post_init__(self) -> None:
         for name in (
             "min_peak_quality",
-            "max_coarse_fine_disagreement_m",
             "max_speed_mps",
             "max_yaw_rate_dps",
             "max_prediction_error_m",
@@ -138,8 +127,6 @@ class QualityConfig:
             "min_sigma_xy_m",
             "min_sigma_yaw_deg",
             "sigma_scale",
-            "gap_sigma_xy_m",
-            "gap_sigma_yaw_deg",
         ):
             checks.positive(name, getattr(self, name))
         for name in (
@@ -160,23 +147,18 @@ class KeyframeConfig:
         max_rotation_deg: rotation from the keyframe [deg].
         min_peak_quality: peak quality below which the keyframe is renewed (overlap fading).
         max_frames: at most this many frames are registered against one keyframe.
-        fallback_keyframes: when the keyframe and the last registered scan cannot be
-            registered, this many earlier keyframes are tried before the previous scan (a
-            gap's pose is only a prediction; see `odometry.recovery`).
     """
 
     max_translation_m: float = 10.0
     max_rotation_deg: float = 15.0
     min_peak_quality: float = 12.0
     max_frames: int = 8
-    fallback_keyframes: int = 2
 
     def __post_init__(self) -> None:
         checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
         checks.positive("max_rotation_deg", self.max_rotation_deg, allow_inf=True)
         checks.non_negative("min_peak_quality", self.min_peak_quality)
         checks.at_least("max_frames", self.max_frames, 1)
-        checks.at_least("fallback_keyframes", self.fallback_keyframes, 0)
 
 
 @dataclass(frozen=True)

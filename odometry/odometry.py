@@ -67,6 +67,15 @@ from raplace.units import NS_PER_S
 logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
+GAP_SIGMA_XY_M = 1.0
+"""Standard deviation [m] of a constant-velocity prediction that covers a failed registration
+(a few m/s^2 of braking or acceleration over a 4 Hz interval, with margin)."""
+GAP_SIGMA_YAW_DEG = 5.0
+"""The same for its rotation [deg] (a steering change over the interval)."""
+FALLBACK_KEYFRAMES = 2
+"""Earlier keyframes tried, most recent first, before the previous scan when the keyframe and
+the last registered scan cannot be registered (a gap's pose is only a prediction;
+`odometry.recovery`)."""
 
 
 class Odometry:
@@ -331,7 +340,7 @@ class Odometry:
         if new_keyframe:
             node.scan = deskew_choice.refreshed(node.scan, state.velocity, self.config)
             state.earlier_keyframes = recovery.remembered_keyframes(
-                state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
+                state.earlier_keyframes, keyframe, FALLBACK_KEYFRAMES
             )
             state.keyframe = node
         else:
@@ -442,7 +451,7 @@ class Odometry:
         failed: MotionEstimate,
     ) -> OdometryResult:
         """Cover a failed registration with the constant-velocity prediction."""
-        state, qcfg = self._state, self.config.quality
+        state = self._state
         previous = state.previous
         assert previous is not None
         if predicted is None or state.velocity is None:
@@ -454,8 +463,8 @@ class Odometry:
             "scan %d: registration failed (%s); constant-velocity gap", index, failed.reason
         )
         motion = between(previous.pose, pose)
-        sigma_yaw = np.deg2rad(qcfg.gap_sigma_yaw_deg)
-        covariance = np.diag([qcfg.gap_sigma_xy_m**2, qcfg.gap_sigma_xy_m**2, sigma_yaw**2])
+        sigma_yaw = np.deg2rad(GAP_SIGMA_YAW_DEG)
+        covariance = np.diag([GAP_SIGMA_XY_M**2, GAP_SIGMA_XY_M**2, sigma_yaw**2])
         node = ScanNode(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
         state.previous = node  # the keyframe stays: the next scan tries it first
         keyframe = state.keyframe

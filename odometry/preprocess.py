@@ -265,8 +265,6 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     wrapped = np.empty((source.shape[0] + 1, source.shape[1]), dtype=np.float32)
     image = wrapped[:-1]  # the seam row is filled below (see `PolarScan.wrapped_image`)
     _condition_rows(source, scale, ring, near, float(cfg.noise_floor_sigmas), image)
-    if cfg.gamma != 1.0:
-        np.power(image, cfg.gamma, out=image)
     wrapped[-1] = image[0]
     return PolarScan(
         image=image,

@@ -76,6 +76,9 @@ cross-correlation, dominated by the brightest returns)."""
 FINE_SEARCH_PX = 6
 """The fine peak is searched within this many fine pixels of the coarse estimate (the coarse
 peak's error is under a coarse pixel, about three fine ones)."""
+MAX_COARSE_FINE_DISAGREEMENT_M = 1.0
+"""Coarse and fine translations further apart than this [m] fail a registration (more than a
+coarse pixel: the fine peak is another structure)."""
 HINT_RADIUS_M = 4.0
 """A registration seeded with a hint searches the coarse translation peak within this distance of
 the hint's translation [m]: the error of a constant-velocity prediction at 1 Hz (a few m/s^2 of
@@ -400,7 +403,7 @@ def _failure_reason(
         return f"weak rotation peak (quality {rotation.quality:.1f})"
     if min(peak.quality, coarse_peak.quality) < qcfg.min_peak_quality:
         return f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
-    if np.hypot(*(motion[:2] - t_coarse)) > qcfg.max_coarse_fine_disagreement_m:
+    if np.hypot(*(motion[:2] - t_coarse)) > MAX_COARSE_FINE_DISAGREEMENT_M:
         return f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
     return ""
 

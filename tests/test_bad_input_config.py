@@ -26,7 +26,6 @@ CONFIG_CASES = [
     ("odometry: {preprocess: {bin_size_m: .nan}}", "odometry.preprocess.bin_size_m"),
     ("odometry: {preprocess: {min_range_m: 200}}", "odometry.preprocess.min_range_m"),
     ("odometry: {preprocess: {min_range_m: 20, max_range_m: 10}}", "max_range_m"),
-    ("odometry: {preprocess: {gamma: 0}}", "odometry.preprocess.gamma"),
     (
         "loop_closure: {raplace: {retrieval: {loop_threshold: -0.1}}}",
         "loop_closure.raplace.retrieval.loop_threshold",

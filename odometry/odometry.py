@@ -1,37 +1,33 @@
-"""Keyframe-based radar odometry: the thin stateful wrapper around `registration`.
+"""Keyframe radar odometry by phase correlation: the method, one scan at a time.
 
-`Odometry(config).register(frame)` is called once per scan, in time order. Each scan is registered
-against the current keyframe (fewer, longer registrations drift less than chaining every pair);
-the scan becomes the new keyframe when it has moved or turned far enough from the keyframe, when
-the correlation peak weakens (overlap fading), or after `max_frames` scans.
+`Odometry(config).register(frame)` is called once per scan, in time order:
 
-Motion distortion: each scan is de-skewed with the running velocity to its mid-sweep pose (its
-*image pose*, see `registration.PreparedScan`), where an error of that velocity only smears the
-image symmetrically instead of displacing it; registrations chain the image poses. A scan's pose
-at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
-measured between the last two image poses; that move's error does not accumulate, and its
-covariance is added to the registration's. A new scan is de-skewed at constant velocity; while the
-yaw rate changes, the scan de-skewed with the yaw-rate trend (`DeskewConfig.yaw_rate_extrapolation`,
-bounded so that it never extrapolates more than the last measured change nor turns the yaw rate to
-the other side) is registered too and the stronger correlation decides which de-skew the scan
-keeps: past motion cannot tell a turn that goes on tightening from a curvature step or a yaw-rate
-reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
-from the one its registration then measures (hard braking, a curvature step at a junction), the
-scan is re-rendered with the measured one and registered again. Each of these choices is a pure
-function in `odometry.deskew_choice`.
+1. Condition the scan once (`preprocess`) and render it de-skewed at the running velocity,
+   without the yaw-rate trend, to its mid-sweep pose (its *image pose*,
+   `registration.PreparedScan`): there a velocity error only smears the image symmetrically.
+2. Register its image against the keyframe's (`registration.register_images`, coarse and fine
+   levels counting as one registration): globally, rotation over the full circle and translation
+   over the whole coarse image. When that fails or disagrees with the constant-velocity
+   prediction, register again seeded with the prediction; the stronger correlation wins. The
+   prediction is a hint, never a veto, so a strong registration ends any run of failures.
+3. While the yaw rate changes, register the scan de-skewed with the bounded yaw-rate trend too
+   and keep the de-skew that correlates more strongly (`deskew_choice.with_trend`): past motion
+   cannot tell a turn that tightens from one that ends, the images can.
+4. Measure the velocity between the last two image poses. When it is far from the one the scan
+   was rendered with (hard braking, a curvature change), re-render the scan at the measured
+   velocity and register once more (`deskew_choice.redeskewed`).
+5. The pose at the scan's reference time (`OdometryResult.pose`) is its image pose moved by that
+   velocity; the move's error does not accumulate. The covariance is the correlation peak's
+   plus the terms the peak cannot show (`uncertainty`).
+6. The scan becomes the keyframe when it has moved or turned far enough, when the peak weakens
+   (overlap fading) or after `max_frames` scans.
 
-Each registration is global (rotation over the full circle, translation over the whole coarse
-image; `registration.register_images`); the constant-velocity prediction is a search hint, never
-a veto. When the global estimate fails or disagrees with the prediction, the scan is registered
-again seeded with the prediction, and the stronger correlation wins: the images decide. A strong
-registration therefore ends any run of failures at once, whatever the motion model expected.
-
-When the keyframe cannot be registered, the last registered scan, the earlier keyframes, then
-the previous scan are tried (the reference becomes the keyframe); if all fail, the pose is the
-constant-velocity prediction, flagged (`ok=False`, `gap=True`, a large covariance), and the
-keyframe stays, so the next scan tries it first, again globally. A scan the motion model cannot
-describe stays a local error (`recovery`): a motion faster than a vehicle moves is no velocity,
-but only the images fail a registration, never the kinematic limits.
+Recovery (`recovery`): when the keyframe cannot be registered, the last registered scan, the
+earlier keyframes and then the previous scan are tried; if all fail, the pose is the prediction,
+flagged as a gap (`ok=False`, `gap=True`, a large covariance) and the keyframe stays, so the next
+scan tries it first, globally. Only the images fail a registration; a motion faster than a
+vehicle moves is kept but never becomes the velocity. Every scan counts its registrations
+(`OdometryResult.registrations`).
 """
 
 from __future__ import annotations

@@ -46,6 +46,7 @@ from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import evaluate
 from radar_slam.evaluation.time_offset import ground_truth_with_offset
 from radar_slam.pipeline import load_config, run_odometry
+from radar_slam.pipeline.steps import ground_truth_of
 
 logger = logging.getLogger("ablate_odometry")
 
@@ -139,7 +140,8 @@ def _run(
     one estimated on the same sequence before (at 1 Hz the speed profile is too coarse)."""
     family = spec.split("/")[0]
     config = load_config(family, overrides={"odometry": variant.overrides})
-    sequence = strided(open_sequence(spec, data_root=root), stride)
+    full = open_sequence(spec, data_root=root)
+    sequence = strided(full, stride)
     patch = variant.patch() if variant.patch is not None else contextlib.nullcontext()
     with patch:
         run = run_odometry(sequence, config, max_frames=max_frames)
@@ -154,9 +156,11 @@ def _run(
         if report.time_offset is not None:
             offsets.setdefault(spec, report.time_offset.offset_s)
             metrics = report.offset_applied.get("odometry", metrics)
-        elif spec in offsets and run.ground_truth is not None:
+        elif spec in offsets:
+            _, full_gt = ground_truth_of(full, len(full))  # the GT between the strided scans
+            assert full_gt is not None
             stamps = run.trajectory.timestamps_ns
-            shifted = ground_truth_with_offset(run.ground_truth, stamps, offsets[spec])
+            shifted = ground_truth_with_offset(full_gt, stamps, offsets[spec])
             accuracy_m = 0.0 if report.source is None else report.source.accuracy_m
             metrics = evaluate(run.trajectory, shifted, gt_accuracy_m=accuracy_m)
     if metrics is None:

@@ -8,6 +8,8 @@ it (a stronger correlation) or the registration itself measured a different velo
 - `with_trend`: the yaw-rate trend as a second hypothesis (a turn that goes on tightening);
 - `redeskewed`: the velocity the registration measures, when far from the rendered one (hard
   braking, a curvature step);
+- `weak_searched`: the yaw rate searched by peak quality when the peak is far weaker than the
+  previous scan's (`odometry.rate_search`);
 - `refreshed`: a new keyframe re-rendered for the scans that will register against it.
 
 Pure functions of the scan, its references (`ScanNode`) and the running `Velocity`; the
@@ -19,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from odometry import rate_search
 from odometry.config import OdometryConfig
 from odometry.deskew import twist_from_motion
 from odometry.rate_search import Register
@@ -103,6 +106,32 @@ def redeskewed(
     again = PreparedScan(scan.polar, measured, cfg)
     redone = register(reference.scan, again, cfg, hint=estimate.motion)
     return (again, redone) if redone.ok else rendered
+
+
+WEAK_PEAK_FRACTION = 0.5
+"""A registration whose peak is below this fraction of the previous scan's has its de-skew yaw
+rate searched: a de-skew far off (through a yaw-rate reversal between two scans, at 2 Hz) shows
+as a peak that collapses, where the real drive's peaks change by tens of per cent per scan."""
+
+
+def weak_searched(
+    reference: ScanNode,
+    rendered: Rendered,
+    last_quality: float,
+    cfg: OdometryConfig,
+    register: Register = register_images,
+) -> Rendered:
+    """The scan and its estimate (`rendered`), or, when its peak is below `WEAK_PEAK_FRACTION` of
+    the previous scan's `last_quality`, the scan de-skewed at the yaw rate one round of
+    `rate_search.searched` finds (when that correlates more strongly)."""
+    scan, estimate = rendered
+    if (
+        scan.twist is None
+        or not estimate.ok
+        or estimate.quality >= WEAK_PEAK_FRACTION * last_quality
+    ):
+        return rendered
+    return rate_search.searched(reference.scan, scan, estimate, cfg, register)
 
 
 def refreshed(scan: PreparedScan, velocity: Velocity | None, cfg: OdometryConfig) -> PreparedScan:

@@ -15,7 +15,9 @@
    cannot tell a turn that tightens from one that ends, the images can.
 4. Measure the velocity between the last two image poses. When it is far from the one the scan
    was rendered with (hard braking, a curvature change), re-render the scan at the measured
-   velocity and register once more (`deskew_choice.redeskewed`).
+   velocity and register once more (`deskew_choice.redeskewed`). A peak far weaker than the
+   previous scan's (a de-skew far off, e.g. through a yaw-rate reversal) has its de-skew yaw
+   rate searched by peak quality (`deskew_choice.weak_searched`).
 5. The pose at the scan's reference time (`OdometryResult.pose`) is its image pose moved by that
    velocity; the move's error does not accumulate. The covariance is the correlation peak's
    plus the terms the peak cannot show (`uncertainty`).
@@ -316,6 +318,11 @@ class Odometry:
                 self.config,
                 self._register_images,
             )
+            if state.velocity is not None:
+                last_quality = state.history[len(state.history) - 1].quality
+                scan, estimate = deskew_choice.weak_searched(
+                    reference, (scan, estimate), last_quality, self.config, self._register_images
+                )
             image_pose = compose(reference.image_pose, estimate.motion)
             change = self._update_velocity(base, scan, image_pose, interval_s)
         else:

@@ -1,12 +1,12 @@
-"""A scan's de-skew yaw rate searched by correlation peak quality (used by loop verification).
+"""A scan's de-skew yaw rate searched by correlation peak quality (weak peaks, loop queries).
 
 Between two scans a second apart the yaw rate interpolated for a sweep can be tens of deg/s off
 the sweep's own. Rendered at a range of yaw rates and registered against the same reference, the
 peak quality is highest where the scan's de-skew matches the reference image's: it measures the
 sweep's yaw rate relative to the reference's de-skew, not the true one, which is what a
-registration of the two images needs. `radar_slam.loops.verification` searches a loop query's
-yaw rate this way at low frame rates; the odometry does not (on the real drive it earned
-nothing: scripts/ablate_odometry.py).
+registration of the two images needs. The odometry searches a scan whose peak collapsed
+(`deskew_choice.weak_searched`); `radar_slam.loops.verification` a loop query's yaw rate at low
+frame rates.
 """
 
 from __future__ import annotations

@@ -29,7 +29,6 @@ class PreprocessConfig:
             that do not move with the vehicle).
         noise_floor_sigmas: per azimuth, subtract mean + this many standard deviations of the
             row (a CFAR-like noise floor); negative values disable the floor.
-        gamma: the remaining intensities are raised to this power (1 keeps them linear).
     """
 
     bin_size_m: float = 0.2
@@ -37,7 +36,6 @@ class PreprocessConfig:
     max_range_m: float = 150.0
     ring_noise_removal: bool = True
     noise_floor_sigmas: float = 0.0
-    gamma: float = 1.0
 
     def __post_init__(self) -> None:
         checks.positive("bin_size_m", self.bin_size_m)
@@ -45,7 +43,6 @@ class PreprocessConfig:
         checks.positive("max_range_m", self.max_range_m)
         checks.less("min_range_m", self.min_range_m, "max_range_m", self.max_range_m)
         checks.finite("noise_floor_sigmas", self.noise_floor_sigmas)
-        checks.positive("gamma", self.gamma)
 
 
 @dataclass(frozen=True)
@@ -71,108 +68,11 @@ class LevelConfig:
 
 
 @dataclass(frozen=True)
-class RotationConfig:
-    """Fourier-Mellin rotation: polar resampling of the coarse image's magnitude spectrum.
-
-    Attributes:
-        n_angles: samples of the spectrum's angle over [0, pi) (resolution pi / n_angles).
-        n_radii: samples of the spectrum's radius.
-        min_frequency: lowest spectral radius used, as a fraction of Nyquist (skips the
-            window-dominated low frequencies).
-        max_frequency: highest spectral radius used, as a fraction of Nyquist.
-        log_radius: sample the radius logarithmically (log-polar, PhaRaO) instead of linearly.
-        smoothing_bins: Gaussian width [angle bins] of the correlation peak (low-pass on the
-            cross-power spectrum), for a smooth peak and a sub-bin fit.
-        refine: after the coarse translation, refine the rotation by angular correlation of
-            both scans resampled on a polar grid about the reference sensor (translation
-            removed): Fourier-Mellin alone is biased toward zero by the fixed pixel grid.
-        refine_n_angles: angular samples of that polar grid over a full turn.
-        refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
-        refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
-        refine_passes: at most this many refinements in a row; each after the first
-            re-estimates the coarse translation at the refined yaw (near the previous one)
-            first. The first coarse translation is made at the Fourier-Mellin yaw, which locks
-            toward zero for rotations below about a degree; its error leaks into a single
-            refinement as a rotation error proportional to the rotation (see
-            `tests/test_odometry_rotation_bias.py`). 2 removes that error (docs/decisions.md).
-        refine_repeat_min_deg: the refinement is repeated only while its last correction was
-            larger than this [deg] (the translation was made at a yaw off by that much).
-    """
-
-    n_angles: int = 720
-    n_radii: int = 96
-    min_frequency: float = 0.05
-    max_frequency: float = 0.9
-    log_radius: bool = False
-    smoothing_bins: float = 1.0
-    refine: bool = True
-    refine_n_angles: int = 720
-    refine_min_range_m: float = 5.0
-    refine_max_range_m: float = 80.0
-    refine_range_step_m: float = 0.5
-    refine_smoothing_bins: float = 2.0
-    refine_passes: int = 2
-    refine_repeat_min_deg: float = 0.05
-
-    def __post_init__(self) -> None:
-        checks.at_least("n_angles", self.n_angles, 2)
-        checks.at_least("n_radii", self.n_radii, 2)
-        checks.in_range("min_frequency", self.min_frequency, 0.0, 1.0)
-        checks.in_range("max_frequency", self.max_frequency, 0.0, 1.0, open_low=True)
-        checks.less("min_frequency", self.min_frequency, "max_frequency", self.max_frequency)
-        checks.non_negative("smoothing_bins", self.smoothing_bins)
-        checks.at_least("refine_n_angles", self.refine_n_angles, 2)
-        checks.non_negative("refine_min_range_m", self.refine_min_range_m)
-        checks.positive("refine_max_range_m", self.refine_max_range_m)
-        checks.less(
-            "refine_min_range_m",
-            self.refine_min_range_m,
-            "refine_max_range_m",
-            self.refine_max_range_m,
-        )
-        checks.positive("refine_range_step_m", self.refine_range_step_m)
-        checks.non_negative("refine_smoothing_bins", self.refine_smoothing_bins)
-        checks.at_least("refine_passes", self.refine_passes, 1)
-        checks.non_negative("refine_repeat_min_deg", self.refine_repeat_min_deg)
-
-
-@dataclass(frozen=True)
-class TranslationConfig:
-    """Phase correlation of de-rotated Cartesian images.
-
-    Attributes:
-        smoothing_px: Gaussian width [pixels] of the correlation peak (low-pass on the normalised
-            cross-power spectrum) so that a 3 x 3 Gaussian fit locates it to a fraction of a pixel.
-        whitening: exponent of the spectral normalisation (1 is pure phase correlation, 0 plain
-            cross-correlation).
-        fine_search_px: the fine peak is searched within this many fine pixels of the coarse
-            estimate.
-        use_fine: run the fine (near range, full resolution) level after the coarse one.
-        hint_radius_m: a registration seeded with a hint (a motion model's prediction) searches
-            the coarse translation peak within this distance of the hint's translation [m] (the
-            error of a constant-velocity prediction at 1 Hz: a few m/s^2 of braking or
-            acceleration over the interval).
-    """
-
-    smoothing_px: float = 1.0
-    whitening: float = 1.0
-    fine_search_px: int = 6
-    use_fine: bool = True
-    hint_radius_m: float = 4.0
-
-    def __post_init__(self) -> None:
-        checks.non_negative("smoothing_px", self.smoothing_px)
-        checks.in_range("whitening", self.whitening, 0.0, 1.0)
-        checks.at_least("fine_search_px", self.fine_search_px, 1)
-
-
-@dataclass(frozen=True)
 class QualityConfig:
     """When an estimate counts as failed, and how its covariance is scaled.
 
     Attributes:
         min_peak_quality: minimum peak-to-noise ratio of the translation and rotation peaks.
-        max_coarse_fine_disagreement_m: coarse and fine translations may differ by this much [m].
         max_speed_mps: a motion faster than this is implausible [m/s].
         max_yaw_rate_dps: a rotation faster than this is implausible [deg/s].
         max_prediction_error_m: in `Odometry`, an estimate farther than this from the
@@ -182,9 +82,6 @@ class QualityConfig:
         min_sigma_xy_m: floor of the translation standard deviation [m].
         min_sigma_yaw_deg: floor of the rotation standard deviation [deg].
         sigma_scale: multiplies the peak-derived standard deviations (calibration factor).
-        gap_sigma_xy_m: standard deviation given to a constant-velocity prediction that covers a
-            failed registration [m].
-        gap_sigma_yaw_deg: the same for its rotation [deg].
         velocity_lag_fraction: in `Odometry`, the error of the velocity that moves a pose from
             mid-sweep to the scan's reference time is taken as this fraction of the velocity's
             last change (it lags an accelerating or turning vehicle), per axis.
@@ -196,19 +93,15 @@ class QualityConfig:
             times half a sweep; this multiple of the translation bend is added as a standard
             deviation [m] (above 1 because the measured change itself lags the true one).
         deskew_yaw_error_fraction: the same for the rotation bend [rad].
-        revised_velocity_lag_fraction: in `Odometry`, once a scan's pose is revised with the
-            velocity interpolated across it, the error of that velocity is taken as this
-            fraction of the change of the velocity's change, per axis.
         The translation term is on (1.25: it calibrates the translation of turning steps at
         1 Hz) and the rotation floor is 0.05 deg (it leaves room for the straight steps'
         rotation bias); the two rotation terms are off (0): 0.1 and 1.25 make the odometry's own
         rotation covariances consistent in tight turns, but looser rotations in turns let the
         pose graph put the straight steps' rotation bias into the turns (SLAM ATE worse; the
-        docs/decisions.md, `scripts/bench_nees.py`).
+        covariance notes in docs/odometry_notes.md, `scripts/bench_nees.py`).
     """
 
     min_peak_quality: float = 6.0
-    max_coarse_fine_disagreement_m: float = 1.0
     max_speed_mps: float = 45.0
     max_yaw_rate_dps: float = 120.0
     max_prediction_error_m: float = 1.5
@@ -216,18 +109,14 @@ class QualityConfig:
     min_sigma_xy_m: float = 0.01
     min_sigma_yaw_deg: float = 0.05
     sigma_scale: float = 3.0
-    gap_sigma_xy_m: float = 1.0
-    gap_sigma_yaw_deg: float = 5.0
     velocity_lag_fraction: float = 0.25
     sigma_yaw_deg_per_deg: float = 0.0
     deskew_error_fraction: float = 1.25
     deskew_yaw_error_fraction: float = 0.0
-    revised_velocity_lag_fraction: float = 0.25
 
     def __post_init__(self) -> None:
         for name in (
             "min_peak_quality",
-            "max_coarse_fine_disagreement_m",
             "max_speed_mps",
             "max_yaw_rate_dps",
             "max_prediction_error_m",
@@ -238,8 +127,6 @@ class QualityConfig:
             "min_sigma_xy_m",
             "min_sigma_yaw_deg",
             "sigma_scale",
-            "gap_sigma_xy_m",
-            "gap_sigma_yaw_deg",
         ):
             checks.positive(name, getattr(self, name))
         for name in (
@@ -247,7 +134,6 @@ class QualityConfig:
             "sigma_yaw_deg_per_deg",
             "deskew_error_fraction",
             "deskew_yaw_error_fraction",
-            "revised_velocity_lag_fraction",
         ):
             checks.non_negative(name, getattr(self, name))
 
@@ -261,23 +147,18 @@ class KeyframeConfig:
         max_rotation_deg: rotation from the keyframe [deg].
         min_peak_quality: peak quality below which the keyframe is renewed (overlap fading).
         max_frames: at most this many frames are registered against one keyframe.
-        fallback_keyframes: when the keyframe and the last registered scan cannot be
-            registered, this many earlier keyframes are tried before the previous scan (a
-            gap's pose is only a prediction; see `odometry.recovery`).
     """
 
     max_translation_m: float = 10.0
     max_rotation_deg: float = 15.0
     min_peak_quality: float = 12.0
     max_frames: int = 8
-    fallback_keyframes: int = 2
 
     def __post_init__(self) -> None:
         checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
         checks.positive("max_rotation_deg", self.max_rotation_deg, allow_inf=True)
         checks.non_negative("min_peak_quality", self.min_peak_quality)
         checks.at_least("max_frames", self.max_frames, 1)
-        checks.at_least("fallback_keyframes", self.fallback_keyframes, 0)
 
 
 @dataclass(frozen=True)
@@ -299,91 +180,16 @@ class DeskewConfig:
             trend extrapolated to that time (0: constant velocity); the extrapolated change is
             bounded by the last measured change and never turns the yaw rate to the other side.
             It never enters the prediction a registration is compared with.
-        revise_reference_pose: in `Odometry`, once the next scan has registered, a scan's pose
-            in the history (`Odometry.results`) is revised: its image pose moved to the
-            reference time with the velocity interpolated between the ones measured before
-            and after it (`odometry.reference_time`); what `register` returns is not changed.
-        yaw_rate_search_dps: in `Odometry`, the half-width [deg/s] of a search of a new scan's
-            de-skew yaw rate by correlation peak quality (`odometry.rate_search`; 0: off). Where it
-            runs, the scan is also de-skewed at its yaw rate minus and plus this, then at the
-            parabola's vertex through the three peak qualities (within three half-widths), each
-            registered seeded with the first estimate; the strongest keeps its de-skew. The peak
-            quality measures the sweep's yaw rate relative to the reference image's de-skew, so it
-            matches the two images' distortions rather than finding the true yaw rate
-            (docs/method.md).
-        yaw_rate_search_min_interval_s: the search runs at every scan whose image frame is at
-            least this long [s] after the last one (a low frame rate: 1 Hz; at 4 Hz it is
-            0.25 s, at 2 Hz 0.5 s), `yaw_rate_search_slow_rounds` rounds ...
-        yaw_rate_search_slow_rounds: ... each round around the yaw rate the last one moved to
-            (with a reference de-skewed right, three rounds put the sweep's rate within 2-3
-            deg/s rms on the simulator; docs/decisions.md).
-        yaw_rate_search_min_gain: a searched de-skew replaces the kept one only when its peak
-            quality is higher by more than this fraction.
-        yaw_rate_search_weak_fraction: the search also runs, at any interval, on a registration
-            whose peak quality is below this fraction of the previous scan's (a de-skew far off,
-            e.g. through a yaw-rate reversal between two scans; 0: never).
-        yaw_rate_search_weak_rounds: rounds of search for such a weak registration, each around
-            the yaw rate the last one moved to (the vertex of one round reaches three half-widths;
-            three rounds reach further but did worse at a rate nothing was tuned at).
-        keyframe_rate_change: at low frame rates (as above), a new keyframe is re-rendered at
-            the mean yaw rate since the previous scan's image plus half the change of the rate
-            between the two sweeps that their searches measured (against the previous scan, or
-            against the keyframe both registered to; `odometry.rate_search.keyframe_yaw_rate`);
-            False: at the velocity as measured (the mean, with the yaw-rate trend), as at
-            higher rates.
-        rate_step_candidates: in `Odometry`, a scan whose mean yaw rate since the previous image
-            is `rate_step_min_dps` or more from the previous step's is also de-skewed with a step of
-            the yaw rate at this many times spread over the first half of its sweep
-            (`odometry.rate_search.step_searched`; 0: off); the strongest correlation, by more
-            than `rate_step_min_gain`, keeps its de-skew.
-        rate_step_min_dps: the yaw-rate change [deg/s] from which the step is searched.
-        rate_step_min_gain: a stepped de-skew replaces the kept one only when its peak quality
-            is higher by more than this fraction.
-        rate_step_max_change_dps: bound of a tried step [deg/s].
-        rate_step_max_interval_sweeps: the step is searched only when the previous image is at
-            most this many sweep durations before (consecutive scans: the rate before the step
-            is taken as held since then, which at half the frame rate is too long) ...
-        rate_step_max_prior_change_dps: ... and when the yaw rate measured at the step before
-            changed by at most this [deg/s] (a steady rate; in a smooth ramp of the yaw rate the
-            step model does not hold).
     """
 
     enabled: bool = True
     iterations: int = 1
     mid_sweep: bool = True
     yaw_rate_extrapolation: float = 1.0
-    revise_reference_pose: bool = True
-    yaw_rate_search_dps: float = 16.0
-    yaw_rate_search_min_interval_s: float = 0.75
-    yaw_rate_search_min_gain: float = 0.05
-    yaw_rate_search_weak_fraction: float = 0.5
-    yaw_rate_search_weak_rounds: int = 1
-    yaw_rate_search_slow_rounds: int = 3
-    keyframe_rate_change: bool = True
-    rate_step_candidates: int = 8
-    rate_step_min_dps: float = 3.0
-    rate_step_min_gain: float = 0.05
-    rate_step_max_change_dps: float = 60.0
-    rate_step_max_interval_sweeps: float = 1.25
-    rate_step_max_prior_change_dps: float = 2.0
 
     def __post_init__(self) -> None:
         checks.at_least("iterations", self.iterations, 0)
         checks.finite("yaw_rate_extrapolation", self.yaw_rate_extrapolation)
-        checks.in_range("yaw_rate_search_dps", self.yaw_rate_search_dps, 0.0, 90.0)
-        checks.non_negative("yaw_rate_search_min_interval_s", self.yaw_rate_search_min_interval_s)
-        checks.non_negative("yaw_rate_search_min_gain", self.yaw_rate_search_min_gain)
-        checks.in_range(
-            "yaw_rate_search_weak_fraction", self.yaw_rate_search_weak_fraction, 0.0, 1.0
-        )
-        checks.at_least("yaw_rate_search_weak_rounds", self.yaw_rate_search_weak_rounds, 1)
-        checks.at_least("yaw_rate_search_slow_rounds", self.yaw_rate_search_slow_rounds, 1)
-        checks.at_least("rate_step_candidates", self.rate_step_candidates, 0)
-        checks.non_negative("rate_step_min_dps", self.rate_step_min_dps)
-        checks.non_negative("rate_step_min_gain", self.rate_step_min_gain)
-        checks.in_range("rate_step_max_change_dps", self.rate_step_max_change_dps, 0.0, 360.0)
-        checks.non_negative("rate_step_max_interval_sweeps", self.rate_step_max_interval_sweeps)
-        checks.non_negative("rate_step_max_prior_change_dps", self.rate_step_max_prior_change_dps)
 
 
 def _coarse() -> LevelConfig:
@@ -401,8 +207,6 @@ class OdometryConfig:
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     coarse: LevelConfig = field(default_factory=_coarse)
     fine: LevelConfig = field(default_factory=_fine)
-    rotation: RotationConfig = field(default_factory=RotationConfig)
-    translation: TranslationConfig = field(default_factory=TranslationConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
     deskew: DeskewConfig = field(default_factory=DeskewConfig)

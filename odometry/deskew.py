@@ -10,10 +10,6 @@ measured by the azimuth swept at time tau(q) at the sensor coordinates p = S(tau
 polar (bin, row) where the scan recorded q, so that remapping yields the de-skewed image directly
 (no point lists, one remap). Range is exact for the displacement, bearing to second order, the
 rotation during the sweep to first order; errors stay below a centimetre beyond 10 m at 10 m/s.
-
-A curvature step puts a step of the yaw rate inside a sweep, which no constant twist follows: the
-columns on both sides of it are then turned the same way and the image is rotated as a whole.
-`RateStep` adds such a step to the de-skew (`odometry.rate_search.step_searched` finds it).
 """
 
 from __future__ import annotations
@@ -33,23 +29,6 @@ MIN_RANGE_SQUARED_M2 = 1e-4
 """Guards the bearing correction's denominator at the sensor itself (that pixel is zeroed)."""
 
 
-@dataclass(frozen=True)
-class RateStep:
-    """A step of the yaw rate inside a sweep, on top of a de-skew twist.
-
-    The yaw rate is the twist's before `time_s` and the twist's plus `change_radps` after it, so
-    the sensor's yaw at time tau (from the de-skew time) is
-    w tau + change (max(tau, time_s) - max(0, time_s)). The translation keeps the twist's velocity.
-
-    Attributes:
-        time_s: time of the step relative to the de-skew (image) time [s].
-        change_radps: the yaw rate after the step minus the one before [rad/s].
-    """
-
-    time_s: float
-    change_radps: float
-
-
 def sampling_maps(
     x_m: FloatImage,
     y_m: FloatImage,
@@ -63,7 +42,6 @@ def sampling_maps(
     rotation_rad: float = 0.0,
     twist: NDArray[np.float64] | None = None,
     timing: tuple[float, float] | None = None,
-    rate_step: RateStep | None = None,
 ) -> tuple[FloatImage, FloatImage]:
     """Polar sampling maps of a rotated, de-skewed backward warp.
 
@@ -81,8 +59,6 @@ def sampling_maps(
             None for no de-skew.
         timing: (time of row 0, row period) [s] relative to the scan's reference time, or None
             (no de-skew).
-        rate_step: a step of the yaw rate within the sweep (times relative to the de-skew time,
-            as `timing`'s), or None; used only with a twist.
 
     Returns:
         (bins, rows) float32 maps of shape (H, W) for `raplace.warp.remap`; rows in [0, n).
@@ -98,7 +74,6 @@ def sampling_maps(
         rotation_rad,
         twist,
         timing,
-        rate_step,
     )
     shape = np.shape(x_m)
     bins = np.empty(shape, dtype=np.float32)
@@ -120,10 +95,6 @@ def sampling_maps(
         c.wy,
         c.w2,
         c.yaw_rate,
-        c.stepped,
-        c.step_s,
-        c.step_after_s,
-        c.step_radps,
         bins,
         rows,
     )
@@ -150,11 +121,6 @@ class _MapConstants:
     wy: np.float32 = np.float32(0.0)
     w2: np.float32 = np.float32(0.0)
     yaw_rate: np.float32 = np.float32(0.0)
-    stepped: bool = False
-    step_s: np.float32 = np.float32(0.0)
-    step_after_s: np.float32 = np.float32(0.0)
-    """max(0, step time): the step's yaw term is step_radps (max(tau, step_s) - step_after_s)."""
-    step_radps: np.float32 = np.float32(0.0)
 
     @classmethod
     def of(
@@ -166,7 +132,6 @@ class _MapConstants:
         rotation_rad: float,
         twist: NDArray[np.float64] | None,
         timing: tuple[float, float] | None,
-        rate_step: RateStep | None = None,
     ) -> _MapConstants:
         base = cls(
             scale=np.float32(1.0 / azimuth_step_rad),
@@ -190,17 +155,13 @@ class _MapConstants:
             wy=np.float32(wy),
             w2=np.float32(wx * wx + wy * wy),
             yaw_rate=np.float32(yaw_rate),
-            stepped=rate_step is not None and rate_step.change_radps != 0.0,
-            step_s=np.float32(0.0 if rate_step is None else rate_step.time_s),
-            step_after_s=np.float32(0.0 if rate_step is None else max(0.0, rate_step.time_s)),
-            step_radps=np.float32(0.0 if rate_step is None else rate_step.change_radps),
         )
 
 
 @numba.njit(nogil=True, cache=True)
 def _maps_kernel(
     x_m, y_m, range_m, bearing_rad, scale, offset, n, inv_n, inv_bin, deskew,
-    t0, t1, wx, wy, w2, yaw_rate, stepped, step_s, step_after_s, step_radps, bins, rows,
+    t0, t1, wx, wy, w2, yaw_rate, bins, rows,
 ):  # type: ignore[no-untyped-def]  # fmt: skip
     """`_sampling_maps_numpy` pixel by pixel, the same float32 operations in the same order."""
     half = np.float32(0.5)
@@ -230,8 +191,6 @@ def _maps_kernel(
             if not denominator >= min_r2:
                 denominator = min_r2
             turn = (across / denominator + yaw_rate) * tau
-            if stepped:
-                turn = turn + step_radps * (max(tau, step_s) - step_after_s)
             turn = turn * scale
             moved_row = row - turn
             rows[i, j] = moved_row - np.floor(moved_row * inv_n) * n
@@ -274,11 +233,6 @@ def _sampling_maps_numpy(
     across /= along
     across += c.yaw_rate
     across *= tau
-    if c.stepped:
-        stepped = np.maximum(tau, c.step_s)
-        stepped -= c.step_after_s
-        stepped *= c.step_radps
-        across += stepped
     across *= c.scale
     rows = _wrap_rows(np.subtract(rows_scan, across, out=across), c)
     return bins, rows

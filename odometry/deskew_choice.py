@@ -8,10 +8,9 @@ it (a stronger correlation) or the registration itself measured a different velo
 - `with_trend`: the yaw-rate trend as a second hypothesis (a turn that goes on tightening);
 - `redeskewed`: the velocity the registration measures, when far from the rendered one (hard
   braking, a curvature step);
-- `rate_searched`, `step_searched`: the yaw rate searched by peak quality, or a step of the yaw
-  rate inside the sweep (`odometry.rate_search`);
-- `refreshed`: a new keyframe re-rendered for the scans that will register against it, at low
-  frame rates at `keyframe_rate`.
+- `weak_searched`: the yaw rate searched by peak quality when the peak is far weaker than the
+  previous scan's (`odometry.rate_search`);
+- `refreshed`: a new keyframe re-rendered for the scans that will register against it.
 
 Pure functions of the scan, its references (`ScanNode`) and the running `Velocity`; the
 registration is `registration.register_images`.
@@ -25,6 +24,7 @@ from numpy.typing import NDArray
 from odometry import rate_search
 from odometry.config import OdometryConfig
 from odometry.deskew import twist_from_motion
+from odometry.rate_search import Register
 from odometry.reference_time import image_time_ns
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.state import ScanNode
@@ -66,6 +66,7 @@ def with_trend(
     estimate: MotionEstimate,
     velocity: Velocity | None,
     cfg: OdometryConfig,
+    register: Register = register_images,
 ) -> Rendered:
     """`scan` (de-skewed at constant velocity) and its estimate, or the scan de-skewed with
     the yaw-rate trend and its registration (seeded with the first) when that correlates
@@ -76,7 +77,7 @@ def with_trend(
     if close_twists(trend, scan.twist):
         return scan, estimate
     alternative = PreparedScan(scan.polar, trend, cfg)
-    other = register_images(reference.scan, alternative, cfg, hint=estimate.motion)
+    other = register(reference.scan, alternative, cfg, hint=estimate.motion)
     if other.ok and other.quality > estimate.quality:
         return alternative, other
     return scan, estimate
@@ -89,6 +90,7 @@ def redeskewed(
     interval_s: float,
     velocity: Velocity | None,
     cfg: OdometryConfig,
+    register: Register = register_images,
 ) -> Rendered:
     """The scan and its estimate (`rendered`), re-rendered and re-registered when the velocity
     it was de-skewed with is far from the one its registration measures since `base`
@@ -102,87 +104,43 @@ def redeskewed(
     if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
         return rendered
     again = PreparedScan(scan.polar, measured, cfg)
-    redone = register_images(reference.scan, again, cfg, hint=estimate.motion)
+    redone = register(reference.scan, again, cfg, hint=estimate.motion)
     return (again, redone) if redone.ok else rendered
 
 
-def rate_searched(
+WEAK_PEAK_FRACTION = 0.5
+"""A registration whose peak is below this fraction of the previous scan's has its de-skew yaw
+rate searched: a de-skew far off (through a yaw-rate reversal between two scans, at 2 Hz) shows
+as a peak that collapses, where the real drive's peaks change by tens of per cent per scan."""
+
+
+def weak_searched(
     reference: ScanNode,
     rendered: Rendered,
-    interval_s: float,
     last_quality: float,
     cfg: OdometryConfig,
+    register: Register = register_images,
 ) -> Rendered:
-    """The scan and its estimate (`rendered`), or the scan de-skewed at a yaw rate searched by
-    peak quality where the search is wanted (`rate_search.rounds_wanted`: low frame rates,
-    a peak weak against the previous scan's `last_quality`)."""
+    """The scan and its estimate (`rendered`), or, when its peak is below `WEAK_PEAK_FRACTION` of
+    the previous scan's `last_quality`, the scan de-skewed at the yaw rate one round of
+    `rate_search.searched` finds (when that correlates more strongly)."""
     scan, estimate = rendered
-    rounds = rate_search.rounds_wanted(scan, estimate, interval_s, last_quality, cfg)
-    if rounds == 0:
+    if (
+        scan.twist is None
+        or not estimate.ok
+        or estimate.quality >= WEAK_PEAK_FRACTION * last_quality
+    ):
         return rendered
-    return rate_search.searched(reference.scan, scan, estimate, cfg, register_images, rounds)
+    return rate_search.searched(reference.scan, scan, estimate, cfg, register)
 
 
-def step_searched(
-    reference: ScanNode,
-    base: ScanNode,
-    rendered: Rendered,
-    interval_s: float,
-    velocity: Velocity | None,
-    cfg: OdometryConfig,
-) -> Rendered:
-    """The scan and its estimate (`rendered`), or the scan de-skewed with a step of the yaw
-    rate within its sweep where the yaw rate measured since `base` (`interval_s` [s] before)
-    stepped from a steady one (`rate_search.step_wanted`)."""
-    scan, estimate = rendered
-    if velocity is None or interval_s <= 0:
-        return rendered
-    measured = measured_twist(reference, base, estimate, interval_s)
-    rates = rate_search.StepRates(
-        before=float(velocity.twist[2]),
-        prior_change=velocity.yaw_rate_change,
-        measured=float(measured[2]),
-        interval_s=interval_s,
-    )
-    if not rate_search.step_wanted(scan, estimate, rates, cfg):
-        return rendered
-    return rate_search.step_searched(reference.scan, scan, estimate, rates, cfg, register_images)
-
-
-def keyframe_rate(
-    reference: ScanNode, base: ScanNode, scan: PreparedScan, velocity: Velocity | None
-) -> float | None:
-    """The de-skew yaw rate [rad/s] `scan` gets if it becomes a keyframe at a low frame rate
-    (`rate_search.keyframe_yaw_rate`): the velocity's yaw rate (the mean since `base`'s
-    image) plus half the change between `base`'s de-skew rate and the scan's. Both rates
-    must be relative to the same image's de-skew (the searches match distortions): `base`
-    is `reference`, or had its own rate searched against it. None otherwise, and when `base`
-    is a gap (its pose, hence the mean, is a prediction)."""
-    if velocity is None or scan.twist is None or base.scan.twist is None or base.gap:
-        return None
-    if base is not reference and base.rate_reference != reference.index:
-        return None
-    return rate_search.keyframe_yaw_rate(
-        float(velocity.twist[2]), float(scan.twist[2]), float(base.scan.twist[2])
-    )
-
-
-def refreshed(
-    scan: PreparedScan,
-    yaw_rate: float | None,
-    velocity: Velocity | None,
-    cfg: OdometryConfig,
-) -> PreparedScan:
-    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans),
-    at the yaw rate `yaw_rate` [rad/s] (`keyframe_rate`, low frame rates) when given; `scan`
-    itself where nothing would change or a rate step was chosen by the images."""
+def refreshed(scan: PreparedScan, velocity: Velocity | None, cfg: OdometryConfig) -> PreparedScan:
+    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans);
+    `scan` itself where nothing would change."""
     dcfg = cfg.deskew
     if velocity is None or not dcfg.enabled or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
-    if scan.rate_step is not None or (scan.twist is not None and close_twists(new, scan.twist)):
+    if scan.twist is not None and close_twists(new, scan.twist):
         return scan
-    if dcfg.keyframe_rate_change and yaw_rate is not None:
-        new = new.copy()
-        new[2] = yaw_rate
     return PreparedScan(scan.polar, new, cfg)

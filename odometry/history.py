@@ -1,24 +1,11 @@
-"""The odometry's per-scan results and their history, final one scan late.
-
-`Odometry.register` returns a scan's result at once (its *prompt* result). Its pose at the
-reference time is its image pose moved by a velocity that, at that moment, is only known up to
-the scan: at a yaw-rate reversal late in the sweep that move is off by degrees. When the next
-scan registers, the velocity on both sides of the scan's reference time is known and the pose is
-revised (`ResultHistory.revise`). The history holds the revised results, chained in its own
-poses (`motion` and `keyframe_motion` are relative to the history's poses); the prompt results
-chain in the prompt poses, so that a consumer adding one factor per scan as it comes (a pose
-graph) stays consistent.
-"""
+"""The odometry's per-scan results (`OdometryResult`) and their history."""
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-
-from raplace.se2 import between
 
 FloatArray = NDArray[np.float64]
 
@@ -45,6 +32,8 @@ class OdometryResult:
         gap: the pose is a constant-velocity prediction covering a failed registration.
         quality: peak-to-noise ratio of the translation peak (0 for the first scan or a gap).
         reason: why the registration failed ("" when ok).
+        registrations: image registrations (`registration.register_images`, coarse and fine
+            levels counting as one) run for this scan.
     """
 
     index: int
@@ -59,10 +48,11 @@ class OdometryResult:
     gap: bool
     quality: float
     reason: str = ""
+    registrations: int = 0
 
 
 class ResultHistory:
-    """Every scan's result, the last one prompt and the others revised (see the module)."""
+    """Every scan's result, in order."""
 
     def __init__(self) -> None:
         self._results: list[OdometryResult] = []
@@ -76,31 +66,9 @@ class ResultHistory:
         return list(self._results)
 
     def __getitem__(self, index: int) -> OdometryResult:
-        """Scan `index`'s result (revised unless it is the last)."""
+        """Scan `index`'s result."""
         return self._results[index]
 
     def append(self, result: OdometryResult) -> None:
-        """Add the next scan's prompt result, its motions re-chained to the history's poses."""
-        if self._results:
-            result = self._chained(result, result.pose)
+        """Add the next scan's result."""
         self._results.append(result)
-
-    def revise(self, index: int, pose: FloatArray, covariance: FloatArray | None = None) -> None:
-        """Move the last scan (`index`) to `pose`, its revised T_world_radar at its reference
-        time, with `covariance` (as `OdometryResult.covariance`; None: unchanged)."""
-        if index != len(self._results) - 1 or index == 0:
-            raise ValueError(f"only the last scan after the first can be revised, not {index}")
-        result = self._chained(self._results[index], pose)
-        if covariance is not None:
-            result = dataclasses.replace(result, covariance=np.asarray(covariance, np.float64))
-        self._results[index] = result
-
-    def _chained(self, result: OdometryResult, pose: FloatArray) -> OdometryResult:
-        """`result` at `pose`, its motions relative to the history's earlier poses."""
-        pose = np.asarray(pose, dtype=np.float64)
-        return dataclasses.replace(
-            result,
-            pose=pose,
-            motion=between(self._results[result.index - 1].pose, pose),
-            keyframe_motion=between(self._results[result.keyframe_index].pose, pose),
-        )

@@ -1,41 +1,35 @@
-"""Keyframe-based radar odometry: the thin stateful wrapper around `registration`.
+"""Keyframe radar odometry by phase correlation: the method, one scan at a time.
 
-`Odometry(config).register(frame)` is called once per scan, in time order. Each scan is registered
-against the current keyframe (fewer, longer registrations drift less than chaining every pair);
-the scan becomes the new keyframe when it has moved or turned far enough from the keyframe, when
-the correlation peak weakens (overlap fading), or after `max_frames` scans.
+`Odometry(config).register(frame)` is called once per scan, in time order:
 
-Motion distortion: each scan is de-skewed with the running velocity to its mid-sweep pose (its
-*image pose*, see `registration.PreparedScan`), where an error of that velocity only smears the
-image symmetrically instead of displacing it; registrations chain the image poses. A scan's pose
-at its reference time (the time of `OdometryResult.pose`) is its image pose moved by the velocity
-measured between the last two image poses; that move's error does not accumulate, and its
-covariance is added to the registration's. Once the next scan has registered, the pose is revised
-with the velocity interpolated between the ones measured before and after it
-(`odometry.reference_time`): `register` returns the prompt result, `results` holds the revised ones
-(`odometry.history`). A new scan is de-skewed at constant velocity; while the
-yaw rate changes, the scan de-skewed with the yaw-rate trend (`DeskewConfig.yaw_rate_extrapolation`,
-bounded so that it never extrapolates more than the last measured change nor turns the yaw rate to
-the other side) is registered too and the stronger correlation decides which de-skew the scan
-keeps: past motion cannot tell a turn that goes on tightening from a curvature step or a yaw-rate
-reversal (roundabouts, S-bends), the images can. When the velocity a scan was de-skewed with is far
-from the one its registration then measures (hard braking, a curvature step at a junction), the
-scan is re-rendered with the measured one and registered again; at low frame rates its yaw rate
-can also be searched by peak quality (`odometry.rate_search`, at low frame rates). Each of these
-choices is a pure function in `odometry.deskew_choice`.
+1. Condition the scan once (`preprocess`) and render it de-skewed at the running velocity,
+   without the yaw-rate trend, to its mid-sweep pose (its *image pose*,
+   `registration.PreparedScan`): there a velocity error only smears the image symmetrically.
+2. Register its image against the keyframe's (`registration.register_images`, coarse and fine
+   levels counting as one registration): globally, rotation over the full circle and translation
+   over the whole coarse image. When that fails or disagrees with the constant-velocity
+   prediction, register again seeded with the prediction; the stronger correlation wins. The
+   prediction is a hint, never a veto, so a strong registration ends any run of failures.
+3. While the yaw rate changes, register the scan de-skewed with the bounded yaw-rate trend too
+   and keep the de-skew that correlates more strongly (`deskew_choice.with_trend`): past motion
+   cannot tell a turn that tightens from one that ends, the images can.
+4. Measure the velocity between the last two image poses. When it is far from the one the scan
+   was rendered with (hard braking, a curvature change), re-render the scan at the measured
+   velocity and register once more (`deskew_choice.redeskewed`). A peak far weaker than the
+   previous scan's (a de-skew far off, e.g. through a yaw-rate reversal) has its de-skew yaw
+   rate searched by peak quality (`deskew_choice.weak_searched`).
+5. The pose at the scan's reference time (`OdometryResult.pose`) is its image pose moved by that
+   velocity; the move's error does not accumulate. The covariance is the correlation peak's
+   plus the terms the peak cannot show (`uncertainty`).
+6. The scan becomes the keyframe when it has moved or turned far enough, when the peak weakens
+   (overlap fading) or after `max_frames` scans.
 
-Each registration is global (rotation over the full circle, translation over the whole coarse
-image; `registration.register_images`); the constant-velocity prediction is a search hint, never
-a veto. When the global estimate fails or disagrees with the prediction, the scan is registered
-again seeded with the prediction, and the stronger correlation wins: the images decide. A strong
-registration therefore ends any run of failures at once, whatever the motion model expected.
-
-When the keyframe cannot be registered, the last registered scan, the earlier keyframes, then
-the previous scan are tried (the reference becomes the keyframe); if all fail, the pose is the
-constant-velocity prediction, flagged (`ok=False`, `gap=True`, a large covariance), and the
-keyframe stays, so the next scan tries it first, again globally. A scan the motion model cannot
-describe stays a local error (`recovery`): a motion faster than a vehicle moves is no velocity,
-and a strong registration the kinematic limits reject beats a weaker one or a gap.
+Recovery (`recovery`): when the keyframe cannot be registered, the last registered scan, the
+earlier keyframes and then the previous scan are tried; if all fail, the pose is the prediction,
+flagged as a gap (`ok=False`, `gap=True`, a large covariance) and the keyframe stays, so the next
+scan tries it first, globally. Only the images fail a registration; a motion faster than a
+vehicle moves is kept but never becomes the velocity. Every scan counts its registrations
+(`OdometryResult.registrations`).
 """
 
 from __future__ import annotations
@@ -45,16 +39,14 @@ import logging
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, deskew_choice, rate_search, recovery
+from odometry import OdometryError, deskew_choice, recovery
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.deskew_choice import Rendered
 from odometry.history import OdometryResult
 from odometry.preprocess import preprocess_polar
 from odometry.reference_time import (
     image_interval_s,
     image_time_ns,
-    interpolated_twist,
     move_centre_ns,
     pose_at_reference,
     seconds_to_ns,
@@ -62,14 +54,7 @@ from odometry.reference_time import (
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.state import OdometryState, ScanNode
-from odometry.uncertainty import (
-    RevisionTerms,
-    conversion_covariance,
-    factor_covariance,
-    revised_conversion_covariance,
-    revised_factor_covariance,
-    unseen_covariance,
-)
+from odometry.uncertainty import conversion_covariance, factor_covariance, unseen_covariance
 from odometry.velocity import (
     Velocity,
     bounded_twist,
@@ -80,6 +65,15 @@ from raplace.units import NS_PER_S
 logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
+GAP_SIGMA_XY_M = 1.0
+"""Standard deviation [m] of a constant-velocity prediction that covers a failed registration
+(a few m/s^2 of braking or acceleration over a 4 Hz interval, with margin)."""
+GAP_SIGMA_YAW_DEG = 5.0
+"""The same for its rotation [deg] (a steering change over the interval)."""
+FALLBACK_KEYFRAMES = 2
+"""Earlier keyframes tried, most recent first, before the previous scan when the keyframe and
+the last registered scan cannot be registered (a gap's pose is only a prediction;
+`odometry.recovery`)."""
 
 
 class Odometry:
@@ -100,14 +94,11 @@ class Odometry:
     # -- results ------------------------------------------------------------------------------
     @property
     def results(self) -> list[OdometryResult]:
-        """One result per registered scan, in order: each scan's pose revised once the next
-        scan has registered (the last one is as `register` returned it; see
-        `odometry.history`)."""
+        """One result per registered scan, in order (as `register` returned them)."""
         return self._state.history.results
 
     def result(self, index: int) -> OdometryResult:
-        """Scan `index`'s result as in `results` (revised once the next scan has registered),
-        without copying the list."""
+        """Scan `index`'s result as in `results`, without copying the list."""
         return self._state.history[index]
 
     @property
@@ -135,6 +126,13 @@ class Odometry:
         return best
 
     @property
+    def registrations_per_scan(self) -> float:
+        """Image registrations (`OdometryResult.registrations`) per scan after the first, on
+        average (0 before the second scan)."""
+        counts = [r.registrations for r in self.results[1:]]
+        return float(np.mean(counts)) if counts else 0.0
+
+    @property
     def keyframes(self) -> list[int]:
         """Indices of the scans that became keyframes."""
         return [r.index for r in self.results if r.is_keyframe]
@@ -160,13 +158,14 @@ class Odometry:
 
     # -- the per-frame step -------------------------------------------------------------------
     def register(self, frame: Scan) -> OdometryResult:
-        """Register the next scan; returns its prompt result: its pose and how it was obtained,
-        `motion` from the previous scan's prompt pose (so that the returned results chain).
+        """Register the next scan; returns its result: its pose and how it was obtained,
+        `motion` from the previous scan's pose.
 
         Raises:
             OdometryError: the scan is malformed or not later than the previous one.
         """
         state = self._state
+        state.registrations = 0
         index = len(state.history)
         scan = self._prepare(frame)
         previous = state.previous
@@ -183,7 +182,7 @@ class Odometry:
         if reference is None:
             return self._gap(index, scan, predicted, estimate)
         scan, estimate = deskew_choice.with_trend(
-            reference, scan, estimate, state.velocity, self.config
+            reference, scan, estimate, state.velocity, self.config, self._register_images
         )
         return self._accept(index, scan, reference, estimate, dt_s)
 
@@ -263,15 +262,14 @@ class Odometry:
         disagrees with the prediction also seeded with the prediction; the stronger correlation
         wins (see the module docstring)."""
         cfg = self.config
-        estimate = register_images(reference.scan, scan, cfg)
+        estimate = self._register_images(reference.scan, scan, cfg)
         if predicted is None:
             return estimate
         expected = between(reference.image_pose, predicted)
         if estimate.ok and recovery.agrees(estimate.motion, expected, self.config):
             return estimate
-        seeded = register_images(reference.scan, scan, cfg, hint=expected)
-        strong = estimate.ok or estimate.implausible  # the images support it
-        if seeded.ok and (not strong or seeded.quality > estimate.quality):
+        seeded = self._register_images(reference.scan, scan, cfg, hint=expected)
+        if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
             logger.debug(
                 "scan against %d: seeded estimate %s (quality %.1f) beats %s (%.1f%s)",
                 reference.index,
@@ -305,22 +303,28 @@ class Odometry:
             base.scan, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
         image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
-        keyframe_rate, rate_reference = None, None
         # A motion faster than a vehicle moves, or across a gap that hid more than the
         # prediction allows, is no velocity: the one from before is kept (recovery.py).
         measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
-            scan, estimate = self._chosen_deskew(reference, base, (scan, estimate), interval_s)
+            scan, estimate = deskew_choice.redeskewed(
+                reference,
+                base,
+                (scan, estimate),
+                interval_s,
+                state.velocity,
+                self.config,
+                self._register_images,
+            )
+            if state.velocity is not None:
+                last_quality = state.history[len(state.history) - 1].quality
+                scan, estimate = deskew_choice.weak_searched(
+                    reference, (scan, estimate), last_quality, self.config, self._register_images
+                )
             image_pose = compose(reference.image_pose, estimate.motion)
-            before = state.velocity
             change = self._update_velocity(base, scan, image_pose, interval_s)
-            if before is not None and base is previous and not previous.gap:
-                self._revise(previous, before)
-            if rate_search.searched_slowly(interval_s, self.config):
-                rate_reference = reference.index
-                keyframe_rate = deskew_choice.keyframe_rate(reference, base, scan, state.velocity)
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         pose = self._reference_pose(image_pose, scan)
@@ -333,26 +337,19 @@ class Odometry:
             conversion_covariance=conversion_covariance(
                 estimate.covariance, change, scan.image_time_s, interval_s, self.config.quality
             ),
-            rate_reference=rate_reference,
         )
-        covariance = self._factor_covariance(
-            previous, reference, node, estimate, change, interval_s
-        )
+        covariance = self._factor_covariance(previous, reference, node, estimate, change)
         new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = deskew_choice.refreshed(
-                node.scan, keyframe_rate, state.velocity, self.config
-            )
+            node.scan = deskew_choice.refreshed(node.scan, state.velocity, self.config)
             state.earlier_keyframes = recovery.remembered_keyframes(
-                state.earlier_keyframes, keyframe, self.config.keyframe.fallback_keyframes
+                state.earlier_keyframes, keyframe, FALLBACK_KEYFRAMES
             )
             state.keyframe = node
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = deskew_choice.refreshed(
-                    keyframe.scan, None, state.velocity, self.config
-                )
+                keyframe.scan = deskew_choice.refreshed(keyframe.scan, state.velocity, self.config)
         state.previous = state.last_registered = node
         return self._record(
             node,
@@ -372,52 +369,33 @@ class Odometry:
         node: ScanNode,
         estimate: MotionEstimate,
         change: FloatArray,
-        interval_s: float,
     ) -> FloatArray:
-        """The covariance of `node`'s result (in `previous`'s axes); keeps on the node what its
-        revision will need (`node.revision`)."""
+        """The covariance of `node`'s result (in `previous`'s axes)."""
         registration_covariance = estimate.covariance + unseen_covariance(
             estimate.motion, change, node.scan, self.config.quality
         )
-        turn = float(between(previous.pose, reference.pose)[2])
-
-        def in_previous_axes(previous_conversion: FloatArray, own: FloatArray) -> FloatArray:
-            return factor_covariance(
-                registration_covariance,
-                reference.pose,
-                reference.image_pose,
-                node.pose,
-                own,
-                turn,
-                previous_conversion,
-            )
-
-        node.revision = RevisionTerms(
-            # What the revision keeps: all but the scan's own conversion (`_revise` adds it).
-            fixed=in_previous_axes(previous.settled_conversion, np.zeros((3, 3))),
-            conversion_angle=float(between(previous.pose, node.pose)[2]),
-            registration_covariance=estimate.covariance,
-            image_time_s=node.scan.image_time_s,
-            interval_s=interval_s,
-            velocity_change=change,
+        return factor_covariance(
+            registration_covariance,
+            reference.pose,
+            reference.image_pose,
+            node.pose,
+            node.conversion_covariance,
+            float(between(previous.pose, reference.pose)[2]),
+            previous.conversion_covariance,
         )
-        return in_previous_axes(previous.conversion_covariance, node.conversion_covariance)
-
-    def _chosen_deskew(
-        self, reference: ScanNode, base: ScanNode, rendered: Rendered, interval_s: float
-    ) -> Rendered:
-        """The scan's rendering and registration against `reference` after the de-skew steps
-        that follow a measured velocity (`deskew_choice`: re-de-skewed at the measured
-        velocity, the yaw rate searched, a rate step searched); `base` is the scan the velocity
-        is measured from, `interval_s` [s] before."""
-        velocity, cfg = self._state.velocity, self.config
-        rendered = deskew_choice.redeskewed(reference, base, rendered, interval_s, velocity, cfg)
-        if velocity is not None:
-            last = self._state.history[len(self._state.history) - 1].quality
-            rendered = deskew_choice.rate_searched(reference, rendered, interval_s, last, cfg)
-        return deskew_choice.step_searched(reference, base, rendered, interval_s, velocity, cfg)
 
     # -- helpers ------------------------------------------------------------------------------
+    def _register_images(
+        self,
+        reference: PreparedScan,
+        scan: PreparedScan,
+        cfg: OdometryConfig,
+        hint: FloatArray | None = None,
+    ) -> MotionEstimate:
+        """`registration.register_images`, counted in the scan's result (`registrations`)."""
+        self._state.registrations += 1
+        return register_images(reference, scan, cfg, hint)
+
     def _place_first_images(
         self, reference: ScanNode, scan: PreparedScan, image_motion: FloatArray
     ) -> None:
@@ -459,27 +437,6 @@ class Odometry:
         twist = self._velocity_at(move_centre_ns(scan))
         return pose_at_reference(image_pose, twist, scan.image_time_s)
 
-    def _revise(self, node: ScanNode, before: Velocity) -> None:
-        """Revise the previous scan's pose in the history now that the velocity after its image
-        time is measured too (`before` was measured up to it; see `odometry.reference_time`)."""
-        after = self._state.velocity
-        if not self.config.deskew.revise_reference_pose or after is None or node.index == 0:
-            return
-        twist = bounded_twist(
-            interpolated_twist(before, after, move_centre_ns(node.scan)), self.config
-        )
-        covariance = None
-        if node.revision is not None:
-            node.revised_conversion = revised_conversion_covariance(
-                node.revision, after.twist - before.twist, self.config.quality
-            )
-            covariance = revised_factor_covariance(node.revision, node.revised_conversion)
-        self._state.history.revise(
-            node.index,
-            pose_at_reference(node.image_pose, twist, node.scan.image_time_s),
-            covariance,
-        )
-
     def _needs_keyframe(self, estimate: MotionEstimate, keyframe: ScanNode) -> bool:
         kcfg = self.config.keyframe
         return bool(
@@ -497,7 +454,7 @@ class Odometry:
         failed: MotionEstimate,
     ) -> OdometryResult:
         """Cover a failed registration with the constant-velocity prediction."""
-        state, qcfg = self._state, self.config.quality
+        state = self._state
         previous = state.previous
         assert previous is not None
         if predicted is None or state.velocity is None:
@@ -509,8 +466,8 @@ class Odometry:
             "scan %d: registration failed (%s); constant-velocity gap", index, failed.reason
         )
         motion = between(previous.pose, pose)
-        sigma_yaw = np.deg2rad(qcfg.gap_sigma_yaw_deg)
-        covariance = np.diag([qcfg.gap_sigma_xy_m**2, qcfg.gap_sigma_xy_m**2, sigma_yaw**2])
+        sigma_yaw = np.deg2rad(GAP_SIGMA_YAW_DEG)
+        covariance = np.diag([GAP_SIGMA_XY_M**2, GAP_SIGMA_XY_M**2, sigma_yaw**2])
         node = ScanNode(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
         state.previous = node  # the keyframe stays: the next scan tries it first
         keyframe = state.keyframe
@@ -556,6 +513,7 @@ class Odometry:
             gap=gap,
             quality=float(quality),
             reason=reason,
+            registrations=self._state.registrations,
         )
         self._state.history.append(result)
         return result

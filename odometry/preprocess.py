@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from odometry import OdometryError
 from odometry.config import LevelConfig, PreprocessConfig
-from odometry.deskew import RateStep, sampling_maps
+from odometry.deskew import sampling_maps
 from odometry.scan import Scan
 from raplace.units import NS_PER_S
 from raplace.warp import CartesianGrid, remap, remap_wrapped, wrap_rows
@@ -265,8 +265,6 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     wrapped = np.empty((source.shape[0] + 1, source.shape[1]), dtype=np.float32)
     image = wrapped[:-1]  # the seam row is filled below (see `PolarScan.wrapped_image`)
     _condition_rows(source, scale, ring, near, float(cfg.noise_floor_sigmas), image)
-    if cfg.gamma != 1.0:
-        np.power(image, cfg.gamma, out=image)
     wrapped[-1] = image[0]
     return PolarScan(
         image=image,
@@ -394,7 +392,6 @@ def sample_scan(
     rotation_rad: float = 0.0,
     twist: NDArray[np.float64] | None = None,
     time_offset_s: float = 0.0,
-    rate_step: RateStep | None = None,
 ) -> FloatImage:
     """Sample a conditioned scan at arbitrary points (bilinear, 0 beyond its range).
 
@@ -409,8 +406,6 @@ def sample_scan(
             sweep, for de-skewing; None (or a scan without times) samples the scan as measured.
         time_offset_s: the scan is de-skewed to the sensor pose at this time after its reference
             time [s] (negative: before); ignored without de-skewing.
-        rate_step: a step of the yaw rate within the sweep, its time relative to the de-skew
-            time (`odometry.deskew.RateStep`); None: the twist's yaw rate throughout.
 
     Returns:
         (H, W) float32 intensities.
@@ -430,7 +425,6 @@ def sample_scan(
         timing=None
         if timing is None
         else (timing.first_row_s - time_offset_s, timing.row_period_s),
-        rate_step=rate_step,
     )
     return remap_wrapped(polar.wrapped_image, bins, rows)
 
@@ -441,11 +435,10 @@ def render_cartesian(
     rotation_rad: float = 0.0,
     twist: NDArray[np.float64] | None = None,
     time_offset_s: float = 0.0,
-    rate_step: RateStep | None = None,
 ) -> FloatImage:
     """The windowed Cartesian image (size_px, size_px) float32 of a conditioned scan.
 
-    `rotation_rad`, `twist`, `time_offset_s` and `rate_step` as in `sample_scan`; the image is
+    `rotation_rad`, `twist` and `time_offset_s` as in `sample_scan`; the image is
     multiplied by the level's apodisation window.
     """
     image = sample_scan(
@@ -457,7 +450,6 @@ def render_cartesian(
         rotation_rad,
         twist,
         time_offset_s,
-        rate_step,
     )
     image *= level.window
     return image

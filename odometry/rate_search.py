@@ -1,109 +1,41 @@
-"""A new scan's de-skew yaw rate searched by correlation peak quality (low frame rates, weak peaks).
+"""A scan's de-skew yaw rate searched by correlation peak quality (weak peaks, loop queries).
 
-At 1 Hz the velocity a scan is de-skewed with is the mean over the second before it; through a
-yaw-rate step or reversal the sweep's own yaw rate can be tens of deg/s away. Rendered at a range
-of yaw rates and registered against the same reference, the peak quality is highest where the
-scan's de-skew matches the reference image's: it measures the sweep's yaw rate *relative to the
-reference's de-skew* (its error follows the reference's de-skew error), not the true one. Both
-images distorted alike register to a better relative motion than one distorted and one right
-(docs/method.md), which is what this search buys. It runs where it can matter:
-at every scan of a low frame rate (a long interval between the image frames), and on a
-registration whose peak is far weaker than the previous scan's. The second is how a de-skew far
-off shows at any rate: at 2 Hz, leaving a U-turn through a reversal from +30 to -30 deg/s, the
-scan de-skewed at +28 deg/s correlated at a quarter of the previous peak and took an 8 deg wrong
-turn; searched, it registers within 1.5 deg (`DeskewConfig.yaw_rate_search_*`).
-
-Because the search measures a rate relative to the reference's, a new keyframe at a low frame
-rate is not re-rendered at what the search found, nor at the mean yaw rate since the previous
-image (a 1 s mean misses a curvature change inside the second), but at `keyframe_yaw_rate`: that
-mean plus half the change between the two sweeps' rates that the search measured. The yaw step
-between the two images gives the sum of the two sweeps' rates, the search their difference, so
-the keyframe's rate does not carry the reference's error (where the yaw rate is linear between
-the two sweeps), and the next scan's search matches it (docs/decisions.md). When
-the previous scan was not a keyframe, both scans were searched against the same keyframe: the
-difference of their two searched rates is the change, and the reference's error cancels in it.
-
-`step_searched` goes one step further where the yaw rate changed: a curvature step inside a sweep
-is a step of the yaw rate, which no constant de-skew follows (both sides of the step turn the
-image the same way; docs/method.md). The scan is de-skewed with the rate before (the
-previous step's) up to a searched time and a rate after it that keeps the yaw measured since the
-previous image, and the time whose image correlates most strongly wins
-(`DeskewConfig.rate_step_*`). It runs only where that model holds: after a steady yaw rate, on
-consecutive scans.
+Between two scans a second apart the yaw rate interpolated for a sweep can be tens of deg/s off
+the sweep's own. Rendered at a range of yaw rates and registered against the same reference, the
+peak quality is highest where the scan's de-skew matches the reference image's: it measures the
+sweep's yaw rate relative to the reference's de-skew, not the true one, which is what a
+registration of the two images needs. The odometry searches a scan whose peak collapsed
+(`deskew_choice.weak_searched`); `radar_slam.loops.verification` a loop query's yaw rate at low
+frame rates.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import RateStep
 from odometry.registration import MotionEstimate, PreparedScan
 from odometry.velocity import bounded_twist
 
 FloatArray = NDArray[np.float64]
 Register = Callable[..., MotionEstimate]
 """`registration.register_images` (passed in so that callers can count the registrations)."""
+HALF_WIDTH_DPS = 16.0
+"""The search tries the yaw rate minus and plus this [deg/s] (then the parabola's vertex): about
+the error of a yaw rate interpolated across a second of a junction turn."""
+MIN_GAIN = 0.05
+"""A searched de-skew replaces the kept one only when its peak quality is higher by more than
+this fraction (peak qualities of one pair vary by a few percent with the rendering)."""
+LOW_RATE_INTERVAL_S = 0.75
+"""The search is for twists interpolated over at least this long [s] (1 Hz; 4 Hz and 2 Hz
+interpolate over 0.25 and 0.5 s, where the yaw rate is close enough)."""
 MAX_VERTEX_STEPS = 3.0
 """The parabola's vertex is tried at most this many half-widths from the kept yaw rate."""
 MIN_VERTEX_OFFSET = 0.25
 """... and only when it is at least this many half-widths from every point already tried."""
-
-
-def rounds_wanted(
-    scan: PreparedScan,
-    estimate: MotionEstimate,
-    interval_s: float,
-    last_quality: float,
-    cfg: OdometryConfig,
-) -> int:
-    """How many rounds of search `scan`'s de-skew yaw rate gets (0: none). Only a de-skewed,
-    registered scan (`estimate`) is searched, and only while the search is on; the larger of:
-
-    - its peak is weak, below `DeskewConfig.yaw_rate_search_weak_fraction` of the previous
-      scan's (`last_quality`; a de-skew far off, at any frame rate):
-      `yaw_rate_search_weak_rounds` rounds;
-    - its image frame is `interval_s` [s] after the last one, at least
-      `yaw_rate_search_min_interval_s` (a low frame rate): `yaw_rate_search_slow_rounds` rounds.
-    """
-    dcfg = cfg.deskew
-    if dcfg.yaw_rate_search_dps <= 0.0 or scan.twist is None or not estimate.ok:
-        return 0
-    rounds = 0
-    if estimate.quality < dcfg.yaw_rate_search_weak_fraction * last_quality:
-        rounds = dcfg.yaw_rate_search_weak_rounds
-    if searched_slowly(interval_s, cfg):
-        rounds = max(rounds, dcfg.yaw_rate_search_slow_rounds)
-    return rounds
-
-
-def searched_slowly(interval_s: float, cfg: OdometryConfig) -> bool:
-    """Whether a scan `interval_s` [s] after its reference image has its de-skew yaw rate
-    searched as at a low frame rate (`rounds_wanted`)."""
-    dcfg = cfg.deskew
-    return dcfg.yaw_rate_search_dps > 0.0 and interval_s >= dcfg.yaw_rate_search_min_interval_s
-
-
-def keyframe_yaw_rate(mean_rate: float, searched_rate: float, reference_rate: float) -> float:
-    """The de-skew yaw rate [rad/s] of a new keyframe at a low frame rate.
-
-    Args:
-        mean_rate: the mean yaw rate between the previous scan's image and the keyframe's
-            [rad/s].
-        searched_rate: the keyframe's de-skew yaw rate as its search left it [rad/s] ...
-        reference_rate: ... and the previous scan's [rad/s], relative to the same image: the
-            previous scan itself (the keyframe was searched against it) or the image both were
-            searched against. Their difference is the change of the yaw rate from one sweep to
-            the other (the search matches distortions, so the common image's error cancels).
-
-    With the yaw rate linear in time between the two sweeps, the mean is the average of their
-    rates; half the measured change on top of it is the keyframe's sweep rate.
-    """
-    return mean_rate + 0.5 * (searched_rate - reference_rate)
 
 
 def vertex_offset(qualities: tuple[float, float, float]) -> float | None:
@@ -130,17 +62,16 @@ def searched(
 ) -> tuple[PreparedScan, MotionEstimate]:
     """`scan` and its registration against `reference`, or the scan de-skewed at a searched yaw
     rate and its registration (seeded with `estimate`) when that correlates more strongly by
-    more than `DeskewConfig.yaw_rate_search_min_gain`. Each of up to `rounds` rounds costs 2-3
+    more than `MIN_GAIN`. Each of up to `rounds` rounds costs 2-3
     registrations and searches around the yaw rate the last one moved to (it stops where one
-    does not move). The caller decides whether and how long to search (`rounds_wanted`)."""
+    does not move). The caller decides whether and how long to search."""
     found_scan, found = scan, estimate
     for _ in range(rounds):
         better = _search_round(reference, found_scan, found, cfg, register)
         if better[0] is found_scan:
             break
         found_scan, found = better
-    gain = cfg.deskew.yaw_rate_search_min_gain
-    if found.quality <= (1.0 + gain) * estimate.quality:
+    if found.quality <= (1.0 + MIN_GAIN) * estimate.quality:
         return scan, estimate
     return found_scan, found
 
@@ -155,7 +86,7 @@ def _search_round(
     """The strongest of `scan` and the scan de-skewed at its yaw rate -+ the half-width and at
     the vertex of the parabola through their peak qualities."""
     assert scan.twist is not None
-    step = np.deg2rad(cfg.deskew.yaw_rate_search_dps)
+    step = np.deg2rad(HALF_WIDTH_DPS)
     base_twist = scan.twist
 
     def tried(offset: float) -> tuple[PreparedScan, MotionEstimate]:
@@ -172,86 +103,3 @@ def _search_round(
     return max(
         (c for c in candidates if c[1].ok), key=lambda c: c[1].quality, default=(scan, estimate)
     )
-
-
-@dataclass(frozen=True)
-class StepRates:
-    """What a scan's rate-step search knows of the yaw rate.
-
-    Attributes:
-        before: the yaw rate of the previous step [rad/s] (taken as held up to the step).
-        prior_change: how much that rate changed from the step before it [rad/s].
-        measured: the mean yaw rate since the previous image, from this scan's registration
-            [rad/s].
-        interval_s: the time since the previous image [s].
-    """
-
-    before: float
-    prior_change: float
-    measured: float
-    interval_s: float
-
-
-def step_wanted(
-    scan: PreparedScan, estimate: MotionEstimate, rates: StepRates, cfg: OdometryConfig
-) -> bool:
-    """Whether `scan`'s de-skew is searched for a step of the yaw rate: the search is on, the
-    scan is de-skewed and registered, the previous image is at most
-    `DeskewConfig.rate_step_max_interval_sweeps` sweeps back, the rate before was steady (changed
-    by at most `rate_step_max_prior_change_dps`), and the measured rate is
-    `rate_step_min_dps` or more away from it."""
-    dcfg, timing = cfg.deskew, scan.polar.timing
-    if dcfg.rate_step_candidates == 0 or scan.twist is None or timing is None or not estimate.ok:
-        return False
-    sweep_s = abs(timing.row_period_s) * scan.polar.n_azimuths
-    if not 0.0 < rates.interval_s <= dcfg.rate_step_max_interval_sweeps * sweep_s:
-        return False
-    if abs(rates.prior_change) > np.deg2rad(dcfg.rate_step_max_prior_change_dps):
-        return False
-    return bool(abs(rates.measured - rates.before) >= np.deg2rad(dcfg.rate_step_min_dps))
-
-
-def step_candidates(scan: PreparedScan, rates: StepRates, cfg: OdometryConfig) -> list[RateStep]:
-    """The rate steps tried on `scan`: `DeskewConfig.rate_step_candidates` times spread evenly
-    over the sweep's part before the image time, the rate before them `rates.before` (held
-    since the previous image) and the one after chosen so that the yaw turned since the previous
-    image stays the measured one, the change bounded by `rate_step_max_change_dps`. (A step
-    after the image time leaves the measured yaw unchanged: only the next scan tells it.)"""
-    assert scan.twist is not None and scan.polar.timing is not None
-    timing, dcfg = scan.polar.timing, cfg.deskew
-    n = dcfg.rate_step_candidates
-    start = timing.first_row_s - scan.image_time_s
-    end = start + (scan.polar.n_azimuths - 1) * timing.row_period_s
-    first = max(min(start, end), -rates.interval_s)
-    times = first * (1.0 - (np.arange(n) + 0.5) / n)  # from `first` up to the image time
-    limit = np.deg2rad(dcfg.rate_step_max_change_dps)
-    turned = rates.measured * rates.interval_s
-    after = (turned - rates.before * (rates.interval_s + times)) / -times
-    changes = np.clip(after - rates.before, -limit, limit)
-    return [RateStep(float(t), float(c)) for t, c in zip(times, changes, strict=True)]
-
-
-def step_searched(
-    reference: PreparedScan,
-    scan: PreparedScan,
-    estimate: MotionEstimate,
-    rates: StepRates,
-    cfg: OdometryConfig,
-    register: Register,
-) -> tuple[PreparedScan, MotionEstimate]:
-    """`scan` and its registration against `reference`, or the scan de-skewed with the
-    strongest of `step_candidates` and its registration (seeded with `estimate`) when that
-    correlates more strongly by more than `DeskewConfig.rate_step_min_gain`. The caller
-    decides whether to search (`step_wanted`)."""
-    assert scan.twist is not None
-    twist = scan.twist.copy()
-    twist[2] = rates.before
-    best_scan, best = scan, estimate
-    for step in step_candidates(scan, rates, cfg):
-        stepped = PreparedScan(scan.polar, twist, cfg, step)
-        found = register(reference, stepped, cfg, hint=estimate.motion)
-        if found.ok and found.quality > best.quality:
-            best_scan, best = stepped, found
-    if best.quality <= (1.0 + cfg.deskew.rate_step_min_gain) * estimate.quality:
-        return scan, estimate
-    return best_scan, best

@@ -11,10 +11,9 @@ wrong but passes its checks) must not pass its error on. Two rules keep it local
   running velocity nor re-renders the scan (a de-skew at the clamped 120 deg/s bends an image by
   +-15 deg, and moving a pose from mid-sweep to the end of the sweep turns it by 15 deg); the
   velocity from before is kept until two registered scans in a row measure it again.
-- `preferred`: a registration whose images pass every check but whose motion is faster than
-  the vehicle can move (`MotionEstimate.implausible`) is kept when it correlates more strongly
-  than every plausible one (or when none registers): a prior is a hint, never a veto, and the
-  images decide; its motion is then not taken as the velocity (above).
+- a registration whose images pass every check is kept even when its motion is faster than
+  the vehicle can move (a prior is a hint, never a veto: only the images fail a registration);
+  its motion is then not taken as the velocity (above).
 - `fallback_references`: when the keyframe cannot be registered (it may itself be such a scan),
   the earlier keyframes are tried before a gap scan, whose pose is only a prediction: a scan
   that registers against an older keyframe ends the gap with a measured pose instead of
@@ -23,7 +22,6 @@ wrong but passes its checks) must not pass its error on. Two rules keep it local
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from typing import TypeVar
 
@@ -78,24 +76,7 @@ def remembered_keyframes(
 def chosen(
     tried: Sequence[tuple[Node, MotionEstimate]],
 ) -> tuple[Node | None, MotionEstimate]:
-    """The registration to use among those `tried` (in order; only the last may be ok): the
-    one that passed every check, unless one that failed only for its speed or yaw rate
-    (`MotionEstimate.implausible`) correlates more strongly, which is then returned marked ok;
-    (None, the last estimate) when none is usable."""
-    found = tried[-1] if tried[-1][1].ok else None
-    candidates = [t for t in tried if t[1].implausible]
-    strongest = max(candidates, key=lambda t: t[1].quality) if candidates else None
-    result = preferred(found, strongest)
-    return (None, tried[-1][1]) if result is None else result
-
-
-def preferred(
-    found: tuple[Node, MotionEstimate] | None, implausible: tuple[Node, MotionEstimate] | None
-) -> tuple[Node, MotionEstimate] | None:
-    """The registration to use: `found` (the first that passed every check, or None), unless
-    `implausible` (the strongest that failed only for its speed or yaw rate) correlates more
-    strongly, which is then returned marked ok."""
-    if implausible is None or (found is not None and found[1].quality >= implausible[1].quality):
-        return found
-    reference, estimate = implausible
-    return reference, dataclasses.replace(estimate, ok=True, reason="", implausible=False)
+    """The registration to use among those `tried` (in order; only the last may be ok): the last
+    one when it passed every check, else (None, its estimate)."""
+    reference, estimate = tried[-1]
+    return (reference, estimate) if estimate.ok else (None, estimate)

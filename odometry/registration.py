@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import RateStep, motion_from_twist, twist_from_motion
+from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.phase_correlation import (
     PackedSpectrum,
     Peak,
@@ -49,6 +49,7 @@ from odometry.preprocess import (
     sample_scan,
 )
 from odometry.rotation import (
+    ROTATION,
     RotationEstimate,
     Signature,
     angular_spectrum,
@@ -66,6 +67,24 @@ logger = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 
 
+PEAK_SMOOTHING_PX = 1.0
+"""Gaussian width [pixels] of a translation correlation peak (low-pass on the normalised
+cross-power spectrum), so that a 3 x 3 Gaussian fit locates it to a fraction of a pixel."""
+WHITENING = 1.0
+"""Exponent of the spectral normalisation: 1 is pure phase correlation (0 would be plain
+cross-correlation, dominated by the brightest returns)."""
+FINE_SEARCH_PX = 6
+"""The fine peak is searched within this many fine pixels of the coarse estimate (the coarse
+peak's error is under a coarse pixel, about three fine ones)."""
+MAX_COARSE_FINE_DISAGREEMENT_M = 1.0
+"""Coarse and fine translations further apart than this [m] fail a registration (more than a
+coarse pixel: the fine peak is another structure)."""
+HINT_RADIUS_M = 4.0
+"""A registration seeded with a hint searches the coarse translation peak within this distance of
+the hint's translation [m]: the error of a constant-velocity prediction at 1 Hz (a few m/s^2 of
+braking or acceleration over the interval)."""
+
+
 @dataclass(frozen=True)
 class MotionEstimate:
     """Relative motion between two scans.
@@ -79,8 +98,6 @@ class MotionEstimate:
         ok: True when every check passed; a caller must not use `motion` when False.
         reason: why the estimate failed ("" when ok).
         coarse_motion: (3,) the coarse level's estimate (for diagnostics).
-        implausible: failed only for being faster than the vehicle can move (every image check
-            passed): a caller may still prefer it to a weaker registration (`Odometry`).
     """
 
     motion: FloatArray
@@ -90,7 +107,6 @@ class MotionEstimate:
     ok: bool
     reason: str = ""
     coarse_motion: FloatArray = field(default_factory=lambda: np.zeros(3))
-    implausible: bool = False
 
     @property
     def dx(self) -> float:
@@ -116,13 +132,10 @@ class PreparedScan:
     Attributes:
         polar: the conditioned polar scan.
         twist: (3,) body velocity used for de-skewing (None: as measured).
-        rate_step: a step of the yaw rate within the sweep on top of `twist`, its time relative
-            to the image time (`odometry.deskew.RateStep`), or None.
         image_time_s: image time relative to the scan's reference time [s] (0 when de-skewing
             is disabled or the scan has no azimuth times).
         image_pose: (3,) T_reference_image, the image frame in the reference frame under
-            `twist` (zeros without a twist); a `rate_step` is not in it (`Odometry` moves poses
-            between image and reference time with its velocity, not with this).
+            `twist` (zeros without a twist).
         empty: nothing is left after conditioning (the scan cannot be registered).
         coarse_spectrum: packed spectrum (`odometry.packed`) of the unrotated coarse image.
         rotation_signature: Fourier-Mellin signature of the coarse image.
@@ -133,12 +146,10 @@ class PreparedScan:
         polar: PolarScan,
         twist: FloatArray | None,
         cfg: OdometryConfig,
-        rate_step: RateStep | None = None,
     ) -> None:
         self.polar = polar
         self.empty = not bool(polar.image.max() > 0)  # the image is non-negative
         self.twist = None if twist is None or polar.timing is None else np.asarray(twist, float)
-        self.rate_step = rate_step if self.twist is not None else None
         self.cfg = cfg
         mid = polar.mid_sweep_s
         use_mid = cfg.deskew.enabled and cfg.deskew.mid_sweep and mid is not None
@@ -157,9 +168,7 @@ class PreparedScan:
 
     def _render(self, level: CartesianLevel, rotation_rad: float) -> NDArray[np.float32]:
         """The scan's windowed image on `level`, turned by `rotation_rad`, at its image time."""
-        return render_cartesian(
-            self.polar, level, rotation_rad, self.twist, self.image_time_s, self.rate_step
-        )
+        return render_cartesian(self.polar, level, rotation_rad, self.twist, self.image_time_s)
 
     def _sample(
         self,
@@ -169,9 +178,7 @@ class PreparedScan:
         rotation_rad: float,
     ) -> NDArray[np.float32]:
         """The scan sampled at (x, y, range, bearing) points of its image frame."""
-        return sample_scan(
-            self.polar, *points, rotation_rad, self.twist, self.image_time_s, self.rate_step
-        )
+        return sample_scan(self.polar, *points, rotation_rad, self.twist, self.image_time_s)
 
     # The spectra are made on first use: a scan re-rendered only to be registered again with a
     # hint (or never used as a reference) needs none of them.
@@ -183,7 +190,7 @@ class PreparedScan:
     @functools.cached_property
     def rotation_signature(self) -> Signature:
         """Fourier-Mellin signature of the coarse image."""
-        return signature(self.coarse_spectrum, self.cfg.rotation)
+        return signature(self.coarse_spectrum, ROTATION)
 
     @functools.cached_property
     def fine_spectrum(self) -> PackedSpectrum:
@@ -193,7 +200,7 @@ class PreparedScan:
     @functools.cached_property
     def refine_image(self) -> NDArray[np.float32]:
         """The scan on the rotation-refinement polar grid (made when the scan is a reference)."""
-        grid = polar_grid(self.cfg.rotation)
+        grid = polar_grid(ROTATION)
         return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
 
     @functools.cached_property
@@ -229,9 +236,9 @@ def _residual_rotation(
 ) -> RotationEstimate:
     """Rotation left after rendering `cur` through (translation, yaw) onto the polar grid about
     `ref`'s sensor."""
-    grid = polar_grid(cfg.rotation)
+    grid = polar_grid(ROTATION)
     moved = cur._sample(grid.shifted(float(translation[0]), float(translation[1])), yaw)
-    return refine_rotation_against(ref.refine_spectrum, moved, cfg.rotation)
+    return refine_rotation_against(ref.refine_spectrum, moved, ROTATION)
 
 
 def register(
@@ -272,23 +279,23 @@ def register_images(
     pi, the half turn resolved by the stronger translation peak), translation anywhere in the
     coarse image. With `hint` (3,) (dx, dy [m], dyaw [rad], e.g. a motion model's prediction)
     the registration is seeded with it: the rotation starts from the hint's yaw and the coarse
-    translation peak is searched within `cfg.translation.hint_radius_m` of the hint's
+    translation peak is searched within `HINT_RADIUS_M` of the hint's
     translation; the refinements that follow are the same. The caller compares the two by their
     peak quality (a hint narrows the search, it never overrules the images).
     """
     coarse_level = cartesian_level(cfg.coarse)
     if hint is None:
-        rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, cfg.rotation)
+        rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, ROTATION)
         coarse_peak, yaw = _coarse_translation(ref, cur, rotation.angle_rad, cfg, None)
     else:
         rotation = RotationEstimate(angle_rad=float(hint[2]), sigma_rad=0.0, quality=np.inf)
         coarse_peak, yaw = _coarse_translation(ref, cur, float(hint[2]), cfg, hint[:2])
     t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
     coarse_motion = np.array([t_coarse[0], t_coarse[1], yaw])
-    if cfg.rotation.refine:
-        for refinement in range(cfg.rotation.refine_passes):
+    if ROTATION.refine:
+        for refinement in range(ROTATION.refine_passes):
             if refinement:
-                if abs(rotation.angle_rad) <= np.deg2rad(cfg.rotation.refine_repeat_min_deg):
+                if abs(rotation.angle_rad) <= np.deg2rad(ROTATION.refine_repeat_min_deg):
                     break  # converged: the translation was made at (about) this yaw
                 # The translation again at the refined yaw (near the last one), then the rotation.
                 coarse_peak, yaw = _coarse_translation(ref, cur, yaw, cfg, t_coarse)
@@ -297,16 +304,12 @@ def register_images(
             yaw = float(wrap_angle(yaw + rotation.angle_rad))
 
     peak, cell = coarse_peak, coarse_level.cell_m
-    if cfg.translation.use_fine:
-        peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
+    peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
     translation = _peak_to_metres(peak, cell)
     motion = np.array([translation[0], translation[1], yaw])
-    dt_s = (cur.timestamp_ns - ref.timestamp_ns) / NS_PER_S
+    # Only the images can fail a registration: a motion faster than a vehicle moves is still
+    # what they show (a prior is a hint, never a veto); it just never becomes a velocity.
     reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, cfg)
-    implausible = False
-    if not reason:
-        reason = kinematic_reason(twist_from_motion(motion, dt_s), cfg) if dt_s > 0 else ""
-        implausible = bool(reason)
     if reason:
         logger.debug("registration failed: %s (motion %s)", reason, motion)
     return MotionEstimate(
@@ -317,7 +320,6 @@ def register_images(
         ok=not reason,
         reason=reason,
         coarse_motion=coarse_motion,
-        implausible=implausible,
     )
 
 
@@ -334,7 +336,6 @@ def _coarse_translation(
     Fourier-Mellin rotation is known modulo pi); with `hint_xy` (2,) [m] only `angle_rad` is
     tried and the peak is searched within `hint_radius_m` of that translation."""
     level = cartesian_level(cfg.coarse)
-    tcfg = cfg.translation
     image = cur._render(level, angle_rad)
     spectrum = forward(image)
     shape = image.shape
@@ -344,13 +345,13 @@ def _coarse_translation(
         if hint_xy is None
         else (float(hint_xy[0]) / level.cell_m, float(hint_xy[1]) / level.cell_m)
     )
-    radius = None if hint_xy is None else tcfg.hint_radius_m / level.cell_m
+    radius = None if hint_xy is None else HINT_RADIUS_M / level.cell_m
     hypotheses = []
     for turn in turns:
         surface = correlate(
-            ref.coarse_spectrum, spectrum, shape, tcfg.smoothing_px, tcfg.whitening, turn != 0.0
+            ref.coarse_spectrum, spectrum, shape, PEAK_SMOOTHING_PX, WHITENING, turn != 0.0
         )
-        hypotheses.append((locate_peak(surface, tcfg.smoothing_px, centre, radius), turn))
+        hypotheses.append((locate_peak(surface, PEAK_SMOOTHING_PX, centre, radius), turn))
     peak, turn = max(hypotheses, key=lambda h: h[0].quality)
     return peak, float(wrap_angle(angle_rad + turn))
 
@@ -359,15 +360,12 @@ def _fine_translation(
     ref: PreparedScan, cur: PreparedScan, t_coarse: FloatArray, yaw: float, cfg: OdometryConfig
 ) -> tuple[Peak, float]:
     """The fine level's translation peak near the coarse estimate, and the fine cell [m]."""
-    tcfg = cfg.translation
     level = cartesian_level(cfg.fine)
     fine = cur._render(level, yaw)
     centre = t_coarse / level.cell_m
-    surface = correlate(
-        ref.fine_spectrum, forward(fine), fine.shape, tcfg.smoothing_px, tcfg.whitening
-    )
+    surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX, WHITENING)
     peak = locate_peak(
-        surface, tcfg.smoothing_px, (float(centre[0]), float(centre[1])), tcfg.fine_search_px
+        surface, PEAK_SMOOTHING_PX, (float(centre[0]), float(centre[1])), FINE_SEARCH_PX
     )
     return peak, level.cell_m
 
@@ -405,7 +403,7 @@ def _failure_reason(
         return f"weak rotation peak (quality {rotation.quality:.1f})"
     if min(peak.quality, coarse_peak.quality) < qcfg.min_peak_quality:
         return f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
-    if np.hypot(*(motion[:2] - t_coarse)) > qcfg.max_coarse_fine_disagreement_m:
+    if np.hypot(*(motion[:2] - t_coarse)) > MAX_COARSE_FINE_DISAGREEMENT_M:
         return f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
     return ""
 

@@ -23,12 +23,63 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.config import RotationConfig
 from odometry.packed import PackedSpectrum, forward_rows
 from odometry.phase_correlation import correlate_1d, locate_peak_1d
 
 Signature = PackedSpectrum
 """Packed row spectra ((n_radii, n_angles) float32, `odometry.packed.forward_rows`)."""
+
+
+@dataclass(frozen=True)
+class RotationSettings:
+    """Fourier-Mellin rotation settings (internal: `ROTATION`): polar resampling of the coarse
+    image's magnitude spectrum and the refinement that follows.
+
+    Attributes:
+        n_angles: samples of the spectrum's angle over [0, pi) (resolution pi / n_angles).
+        n_radii: samples of the spectrum's radius.
+        min_frequency: lowest spectral radius used, as a fraction of Nyquist (skips the
+            window-dominated low frequencies).
+        max_frequency: highest spectral radius used, as a fraction of Nyquist.
+        log_radius: sample the radius logarithmically (log-polar, PhaRaO) instead of linearly.
+        smoothing_bins: Gaussian width [angle bins] of the correlation peak (low-pass on the
+            cross-power spectrum), for a smooth peak and a sub-bin fit.
+        refine: after the coarse translation, refine the rotation by angular correlation of
+            both scans resampled on a polar grid about the reference sensor (translation
+            removed): Fourier-Mellin alone is biased toward zero by the fixed pixel grid.
+        refine_n_angles: angular samples of that polar grid over a full turn.
+        refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
+        refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
+        refine_passes: at most this many refinements in a row; each after the first
+            re-estimates the coarse translation at the refined yaw (near the previous one)
+            first. The first coarse translation is made at the Fourier-Mellin yaw, which locks
+            toward zero for rotations below about a degree; its error leaks into a single
+            refinement as a rotation error proportional to the rotation (see
+            `scripts/diagnose_rotation_bias.py`). 2 removes that error
+            (`tests/test_odometry_rotation_bias.py`).
+        refine_repeat_min_deg: the refinement is repeated only while its last correction was
+            larger than this [deg] (the translation was made at a yaw off by that much).
+    """
+
+    n_angles: int = 720
+    n_radii: int = 96
+    min_frequency: float = 0.05
+    max_frequency: float = 0.9
+    log_radius: bool = False
+    smoothing_bins: float = 1.0
+    refine: bool = True
+    refine_n_angles: int = 720
+    refine_min_range_m: float = 5.0
+    refine_max_range_m: float = 80.0
+    refine_range_step_m: float = 0.5
+    refine_smoothing_bins: float = 2.0
+    refine_passes: int = 2
+    refine_repeat_min_deg: float = 0.05
+
+
+ROTATION = RotationSettings()
+"""The rotation settings the odometry and loop verification use (not a user setting: they
+follow the image levels, not a sensor or a vehicle)."""
 
 
 @dataclass(frozen=True)
@@ -53,7 +104,7 @@ class _PolarSampler:
 
 
 @functools.lru_cache(maxsize=8)
-def _sampler(size_px: int, cfg: RotationConfig) -> _PolarSampler:
+def _sampler(size_px: int, cfg: RotationSettings) -> _PolarSampler:
     """cv2.remap maps from (radius, angle) to the row-centred half spectrum of a square image."""
     nyquist = size_px / 2.0
     lo, hi = cfg.min_frequency * nyquist, cfg.max_frequency * nyquist
@@ -69,7 +120,7 @@ def _sampler(size_px: int, cfg: RotationConfig) -> _PolarSampler:
     )
 
 
-def signature(spectrum: PackedSpectrum, cfg: RotationConfig) -> Signature:
+def signature(spectrum: PackedSpectrum, cfg: RotationSettings) -> Signature:
     """Rotation signature of an image from its packed spectrum (size_px, size_px).
 
     Returns (n_radii, n_angles) float32: the packed angular spectra (`forward_rows`) of the
@@ -114,7 +165,7 @@ def _centred_log_magnitude(packed, out):  # type: ignore[no-untyped-def]  # fmt:
             out[half - r, k] = value
 
 
-def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationConfig) -> RotationEstimate:
+def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationSettings) -> RotationEstimate:
     """Rotation of the `mov` image relative to `ref` (modulo pi) from their signatures."""
     curve = correlate_1d(ref, mov, cfg.n_angles, cfg.smoothing_bins)
     peak = locate_peak_1d(curve, cfg.smoothing_bins)
@@ -156,7 +207,7 @@ class PolarGrid:
 
 
 @functools.lru_cache(maxsize=4)
-def polar_grid(cfg: RotationConfig) -> PolarGrid:
+def polar_grid(cfg: RotationSettings) -> PolarGrid:
     """The refinement grid of a rotation config (cached)."""
     n_ranges = max(
         1, int(round((cfg.refine_max_range_m - cfg.refine_min_range_m) / cfg.refine_range_step_m))
@@ -183,7 +234,7 @@ def angular_spectrum(image: NDArray[np.float32]) -> PackedSpectrum:
 
 
 def refine_rotation(
-    ref: NDArray[np.float32], mov: NDArray[np.float32], cfg: RotationConfig
+    ref: NDArray[np.float32], mov: NDArray[np.float32], cfg: RotationSettings
 ) -> RotationEstimate:
     """Residual rotation of `mov` relative to `ref`, both sampled on the same `PolarGrid`.
 
@@ -200,7 +251,7 @@ def refine_rotation(
 
 
 def refine_rotation_against(
-    ref_spectrum: PackedSpectrum, mov: NDArray[np.float32], cfg: RotationConfig
+    ref_spectrum: PackedSpectrum, mov: NDArray[np.float32], cfg: RotationSettings
 ) -> RotationEstimate:
     """`refine_rotation` with the reference given by its `angular_spectrum` (kept by a
     reference scan that many scans are registered against)."""

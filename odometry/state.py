@@ -10,7 +10,6 @@ from numpy.typing import NDArray
 
 from odometry.history import ResultHistory
 from odometry.registration import PreparedScan
-from odometry.uncertainty import RevisionTerms
 from odometry.velocity import Velocity
 
 FloatArray = NDArray[np.float64]
@@ -30,15 +29,6 @@ class ScanNode:
     gap: bool = False
     conversion_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
     """Covariance (own axes) that moving the image pose to the reference time adds to `pose`."""
-    revision: RevisionTerms | None = None  # to recompute its factor covariance when revised
-    revised_conversion: FloatArray | None = None  # `conversion_covariance` once revised
-    rate_reference: int | None = None  # the scan its yaw rate was searched against, slowly
-
-    @property
-    def settled_conversion(self) -> FloatArray:
-        """The conversion covariance, revised once the pose has been."""
-        revised = self.revised_conversion
-        return self.conversion_covariance if revised is None else revised
 
 
 @dataclass
@@ -49,3 +39,4 @@ class OdometryState:
     earlier_keyframes: list[ScanNode] = field(default_factory=list)  # most recent first
     velocity: Velocity | None = None
     history: ResultHistory = field(default_factory=ResultHistory)
+    registrations: int = 0  # image registrations run for the scan being registered

@@ -1,14 +1,11 @@
 """Covariance terms of the odometry that a registration's correlation peak does not show.
 
 Pure functions used by `odometry.Odometry`: the error of moving a scan's mid-sweep image pose to
-its reference time with a measured velocity (and again once the pose is revised with the
-velocity interpolated across the scan: `RevisionTerms`), and the registration errors that grow
-with the turn and with a de-skew velocity that lags the vehicle's (`QualityConfig`).
+its reference time with a measured velocity, and the registration errors that grow with the turn
+and with a de-skew velocity that lags the vehicle's (`QualityConfig`).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -79,51 +76,3 @@ def factor_covariance(
         registration_covariance, float(between(reference_pose, reference_image_pose)[2])
     ) + rotate_covariance(conversion, float(between(reference_pose, pose)[2]))
     return rotate_covariance(in_reference_axes, previous_turn) + previous_conversion
-
-
-@dataclass(frozen=True)
-class RevisionTerms:
-    """What a scan's factor covariance needs to be recomputed once its pose is revised.
-
-    Attributes:
-        fixed: (3, 3) the terms the revision does not change (the registration with its unseen
-            errors, the reference's conversion), in the previous scan's axes.
-        conversion_angle: angle [rad] that turns the scan's own axes into the previous scan's.
-        registration_covariance: (3, 3) the registration's peak covariance (velocity noise).
-        image_time_s: the scan's image time relative to its reference time [s].
-        interval_s: image interval of the velocity measured before the scan [s].
-        velocity_change: (3,) that velocity's change from the one before [m/s, m/s, rad/s].
-    """
-
-    fixed: FloatArray
-    conversion_angle: float
-    registration_covariance: FloatArray
-    image_time_s: float
-    interval_s: float
-    velocity_change: FloatArray
-
-
-def revised_conversion_covariance(
-    terms: RevisionTerms, change_after: ArrayLike, quality: QualityConfig
-) -> FloatArray:
-    """(3, 3) covariance (scan axes) of moving the image pose to the reference time with the
-    velocity interpolated between the ones measured before and after the scan.
-
-    Averaging the two velocities halves the registration noise of one; the interpolation follows
-    a steady change of velocity, so what it lags is the change of that change (`change_after`
-    (3,), the velocity's change after the scan, minus `terms.velocity_change`), scaled by
-    `quality.revised_velocity_lag_fraction`.
-    """
-    if terms.image_time_s == 0.0 or terms.interval_s <= 0:
-        return np.zeros((3, 3))
-    lag = quality.revised_velocity_lag_fraction * (
-        np.asarray(change_after, dtype=float) - terms.velocity_change
-    )
-    noise = terms.registration_covariance / terms.interval_s**2
-    return terms.image_time_s**2 * (noise + np.diag(lag * lag))
-
-
-def revised_factor_covariance(terms: RevisionTerms, revised_conversion: FloatArray) -> FloatArray:
-    """(3, 3) covariance (previous scan's axes) of a revised scan's factor: `terms.fixed` plus
-    its revised conversion `revised_conversion` (scan axes)."""
-    return terms.fixed + rotate_covariance(revised_conversion, terms.conversion_angle)

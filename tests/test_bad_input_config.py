@@ -26,7 +26,6 @@ CONFIG_CASES = [
     ("odometry: {preprocess: {bin_size_m: .nan}}", "odometry.preprocess.bin_size_m"),
     ("odometry: {preprocess: {min_range_m: 200}}", "odometry.preprocess.min_range_m"),
     ("odometry: {preprocess: {min_range_m: 20, max_range_m: 10}}", "max_range_m"),
-    ("odometry: {preprocess: {gamma: 0}}", "odometry.preprocess.gamma"),
     (
         "loop_closure: {raplace: {retrieval: {loop_threshold: -0.1}}}",
         "loop_closure.raplace.retrieval.loop_threshold",
@@ -79,9 +78,7 @@ CONFIG_CASES = [
         "loop_closure.raplace.retrieval.coarse_n_freq",
     ),
     ("loop_closure: {raplace: {pose: {n_theta: 5}}}", "loop_closure.raplace.pose.n_theta"),
-    ("odometry: {rotation: {n_angles: 0}}", "odometry.rotation.n_angles"),
-    ("odometry: {rotation: {min_frequency: 0.9, max_frequency: 0.5}}", "min_frequency"),
-    ("odometry: {translation: {whitening: 2}}", "odometry.translation.whitening"),
+    ("odometry: {rotation: {n_angles: 720}}", "unknown key 'rotation'"),
     ("odometry: {quality: {sigma_scale: 0}}", "odometry.quality.sigma_scale"),
     ("odometry: {deskew: {iterations: -1}}", "odometry.deskew.iterations"),
     ("graph: {loop_kernel: tukey}", "graph.loop_kernel"),

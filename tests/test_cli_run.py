@@ -111,6 +111,7 @@ def test_odometry_command(
     metrics = json.loads((out / "metrics.json").read_text())
     assert {"frames", "frames_per_second", "ate_rmse_m", "ate_origin_rmse_m"} <= set(metrics)
     assert "drift_trans_pct" in metrics and metrics["frames"] == 40
+    assert 1.0 <= metrics["registrations_per_scan"] <= 4.0  # counted by the odometry itself
     sequence = open_sequence("synthetic/tiny", synthetic_root)
     stamps = read_tum(out / "odometry.tum").timestamps_ns
     np.testing.assert_array_equal(stamps, sequence.timestamps_ns[:40])

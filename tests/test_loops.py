@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from odometry.registration import prepare, register
+from odometry.registration import HINT_RADIUS_M, prepare, register
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import GraphConfig, PoseGraph
@@ -618,6 +618,6 @@ def test_registration_seeded_with_a_prediction_matches_the_global_search(
     for estimate in (free, seeded):
         off = between(gt_relative(tiny, 40, 36), estimate.motion)
         assert np.hypot(*off[:2]) < TRUE_TOLERANCE_M and abs(np.rad2deg(off[2])) < 0.5
-    # The hint is used: 10 m off, beyond `hint_radius_m`, the true peak is out of the search.
+    # The hint is used: 10 m off, beyond `HINT_RADIUS_M`, the true peak is out of the search.
     misled = register(ref, cur, cfg, compose(free.motion, np.array([10.0, 0.0, 0.0])))
-    assert np.hypot(*between(free.motion, misled.motion)[:2]) > cfg.translation.hint_radius_m
+    assert np.hypot(*between(free.motion, misled.motion)[:2]) > HINT_RADIUS_M

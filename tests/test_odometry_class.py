@@ -42,6 +42,10 @@ def test_odometry_follows_ground_truth(frames: list[RadarFrame], ground_truth: n
     assert results[0].is_keyframe and results[0].keyframe_index == 0
     np.testing.assert_array_equal(results[0].pose, np.zeros(3))
     assert odometry.keyframes[0] == 0 and odometry.gaps == []
+    # The odometry counts its own registrations: none for the first scan, one or more after.
+    assert results[0].registrations == 0
+    assert all(r.registrations >= 1 for r in results[1:])
+    assert odometry.registrations_per_scan == np.mean([r.registrations for r in results[1:]])
     for r in results[1:]:
         # Each scan is registered against an earlier keyframe; its motion chains the poses.
         assert r.keyframe_index < r.index

@@ -17,7 +17,7 @@ import pytest
 from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
-from odometry.deskew import RateStep, _MapConstants, _sampling_maps_numpy, sampling_maps
+from odometry.deskew import _MapConstants, _sampling_maps_numpy, sampling_maps
 from odometry.packed import forward_rows, inverse, pack, unpack, unpack_rows
 from odometry.phase_correlation import (
     PEAK_EXCLUSION_SIGMAS,
@@ -41,6 +41,7 @@ from odometry.preprocess import (
 )
 from odometry.registration import PreparedScan, _residual_rotation
 from odometry.rotation import (
+    ROTATION,
     _centred_log_magnitude,
     angular_spectrum,
     polar_grid,
@@ -52,9 +53,8 @@ N_AZ = 400
 SWEEP_S = 0.25
 
 
-def _random_map_arguments(rng: np.random.Generator, deskew: bool, stepped: bool) -> dict:
+def _random_map_arguments(rng: np.random.Generator, deskew: bool) -> dict:
     first_row_s = float(rng.uniform(-SWEEP_S, 0.0))
-    step = RateStep(first_row_s + float(rng.uniform(0.0, SWEEP_S)), float(rng.normal(0.0, 0.5)))
     return {
         "first_azimuth_rad": float(rng.uniform(-4.0, 4.0)),
         "azimuth_step_rad": float(rng.choice([-1.0, 1.0]) * 2.0 * np.pi / N_AZ),
@@ -63,22 +63,21 @@ def _random_map_arguments(rng: np.random.Generator, deskew: bool, stepped: bool)
         "rotation_rad": float(rng.uniform(-3.5, 3.5)),
         "twist": rng.normal(0.0, [10.0, 1.0, 0.5]) if deskew else None,
         "timing": (first_row_s, SWEEP_S / N_AZ),
-        "rate_step": step if stepped else None,
     }
 
 
-@pytest.mark.parametrize(("deskew", "stepped"), [(False, False), (True, False), (True, True)])
-def test_sampling_map_kernel_equals_numpy_reference(deskew: bool, stepped: bool) -> None:
+@pytest.mark.parametrize("deskew", [False, True])
+def test_sampling_map_kernel_equals_numpy_reference(deskew: bool) -> None:
     rng = np.random.default_rng(11)
     level = cartesian_level(LevelConfig(cell_m=0.5, size_px=96))
-    grid = polar_grid(OdometryConfig().rotation)
+    grid = polar_grid(ROTATION)
     point_sets = [
         (level.x_m, level.y_m, level.range_m, level.bearing_rad),
         grid.shifted(3.2, -1.1),  # the refinement grid seen from a moved sensor
     ]
     for points in point_sets:
         for _ in range(6):
-            kwargs = _random_map_arguments(rng, deskew, stepped)
+            kwargs = _random_map_arguments(rng, deskew)
             bins, rows = sampling_maps(*points, **kwargs)
             ref_bins, ref_rows = _sampling_maps_numpy(*points, _MapConstants.of(**kwargs))
             assert bins.dtype == rows.dtype == np.float32
@@ -89,9 +88,6 @@ def test_sampling_map_kernel_equals_numpy_reference(deskew: bool, stepped: bool)
                 plain = _MapConstants.of(**{**kwargs, "twist": None})
                 plain_bins, _ = _sampling_maps_numpy(*points, plain)
                 assert np.abs(bins - plain_bins).max() > 0.1
-            if stepped:  # and the rate step turned them further
-                _, unstepped_rows = sampling_maps(*points, **{**kwargs, "rate_step": None})
-                assert np.abs(rows - unstepped_rows).max() > 0.01
 
 
 @pytest.mark.parametrize("factor", [1, 2, 3, 4, 5])
@@ -151,13 +147,13 @@ def test_prepared_scan_caches_equal_fresh_computations() -> None:
     scan = PreparedScan(polar, twist, cfg)
     coarse = render_cartesian(polar, cartesian_level(cfg.coarse), 0.0, twist, scan.image_time_s)
     np.testing.assert_array_equal(scan.coarse_spectrum, forward(coarse))
-    grid = polar_grid(cfg.rotation)
+    grid = polar_grid(ROTATION)
     np.testing.assert_array_equal(scan.refine_spectrum, angular_spectrum(scan.refine_image))
     # The cached reference spectrum gives the same residual rotation as the images.
     moving = PreparedScan(preprocess_polar(_blob_scan(3, 250_000_000), cfg.preprocess), twist, cfg)
     cached = _residual_rotation(scan, moving, np.array([1.5, 0.2]), 0.05, cfg)
     points = grid.shifted(1.5, 0.2)
-    fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), cfg.rotation)
+    fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), ROTATION)
     assert cached == fresh
 
 

@@ -1,10 +1,7 @@
 """The odometry (`Odometry`, keyframes and all) at low frame rates on real scans: every 2nd to
 4th scan of the RADIATE fog frames and of the Oxford scans (4 Hz data; steps to 7.5 m and 10 m).
 
-What this checks is registration and keyframing at large steps on real radar. It does not check
-the 1 Hz de-skew yaw rate: the RADIATE frames carry no azimuth times (nothing is de-skewed), and
-on Oxford's near-straight drive the search keeps the velocity's rate (the same poses with
-`yaw_rate_search_dps: 0` or `keyframe_rate_change: false`); that is measured on the simulator.
+What this checks is registration and keyframing at large steps on real radar.
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ The Fourier-Mellin rotation locks toward zero for rotations below about a degree
 few per cent of them), so the coarse translation was made at a yaw off by nearly the whole
 rotation; its error leaked into the rotation refinement as a yaw error of about -3.7 % of the
 rotation at a 10 m baseline (-34 mdeg mean for 0.9 deg, up to -73). With the translation
-re-estimated at the refined yaw and the rotation refined again (`RotationConfig.refine_passes`
-2, the default; docs/decisions.md) the error no longer follows the rotation.
+re-estimated at the refined yaw and the rotation refined again (`RotationSettings.refine_passes`
+2, the default) the error no longer follows the rotation.
 """
 
 from __future__ import annotations
@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 from point_scenes import point_scene, render_polar, scan_frame, static_poses
 
-from odometry.config import DeskewConfig, OdometryConfig, RotationConfig
+from odometry import registration
+from odometry.config import DeskewConfig, OdometryConfig
 from odometry.registration import estimate_motion
+from odometry.rotation import ROTATION
 
 SEEDS = range(5)
 MAX_MEAN_RELATIVE_ERROR = 0.005
@@ -28,12 +30,9 @@ MAX_STILL_ERROR_MDEG = 1.0
 """Mean yaw error [mdeg] of a rotation without translation."""
 
 
-def _cfg(passes: int | None = None) -> OdometryConfig:
-    """Without de-skew; `passes` refinements (None: the default config's, 2)."""
-    cfg = OdometryConfig(deskew=DeskewConfig(enabled=False))
-    if passes is None:
-        return cfg
-    return dataclasses.replace(cfg, rotation=RotationConfig(refine_passes=passes))
+def _cfg() -> OdometryConfig:
+    """Without de-skew."""
+    return OdometryConfig(deskew=DeskewConfig(enabled=False))
 
 
 def _yaw_errors_mdeg(
@@ -56,14 +55,16 @@ def _yaw_errors_mdeg(
 
 @pytest.mark.parametrize("rotation_mdeg", [450.0, 900.0, -700.0])
 def test_sub_degree_rotation_with_translation_is_unbiased(rotation_mdeg: float) -> None:
-    errors = _yaw_errors_mdeg((10.0, 0.0), rotation_mdeg, _cfg(passes=2))
+    errors = _yaw_errors_mdeg((10.0, 0.0), rotation_mdeg, _cfg())
     assert abs(errors.mean() / rotation_mdeg) < MAX_MEAN_RELATIVE_ERROR, errors
     assert np.abs(errors).max() < MAX_ERROR_MDEG, errors
 
 
-def test_single_refinement_pass_loses_part_of_the_rotation() -> None:
+def test_single_refinement_pass_loses_part_of_the_rotation(monkeypatch: pytest.MonkeyPatch) -> None:
     """One pass keeps the failure the second pass removes: > 2 % of 0.9 deg."""
-    errors = _yaw_errors_mdeg((10.0, 0.0), 900.0, _cfg(passes=1))
+    one_pass = dataclasses.replace(ROTATION, refine_passes=1)
+    monkeypatch.setattr(registration, "ROTATION", one_pass)
+    errors = _yaw_errors_mdeg((10.0, 0.0), 900.0, _cfg())
     assert errors.mean() < -0.02 * 900.0, errors
 
 
@@ -74,5 +75,5 @@ def test_default_refines_twice() -> None:
 
 @pytest.mark.parametrize("rotation_mdeg", [225.0, 900.0])
 def test_sub_degree_rotation_in_place_is_unbiased(rotation_mdeg: float) -> None:
-    errors = _yaw_errors_mdeg((0.0, 0.0), rotation_mdeg, _cfg(passes=2))
+    errors = _yaw_errors_mdeg((0.0, 0.0), rotation_mdeg, _cfg())
     assert abs(errors.mean()) < MAX_STILL_ERROR_MDEG, errors

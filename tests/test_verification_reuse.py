@@ -112,7 +112,7 @@ def test_other_refinement_settings_reuse_only_the_conditioning(tiny: RadarSequen
     base = OdometryConfig()
     cfg = LoopClosureConfig(
         refinement=dataclasses.replace(
-            base, translation=dataclasses.replace(base.translation, fine_search_px=2)
+            base, fine=dataclasses.replace(base.fine, taper_fraction=0.5)
         )
     )
     query = key_scan(tiny, QUERY)

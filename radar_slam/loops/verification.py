@@ -258,10 +258,9 @@ class GeometricVerifier:
         span = query.twist_span_s
         if (
             not self.cfg.verification.yaw_rate_search
-            or refinement.deskew.yaw_rate_search_dps <= 0.0
             or prepared.twist is None
             or span is None
-            or span < refinement.deskew.yaw_rate_search_min_interval_s
+            or span < rate_search.LOW_RATE_INTERVAL_S
             or not estimate.ok
         ):
             return estimate
@@ -322,7 +321,7 @@ class GeometricVerifier:
         """The phase-correlation half of the verification (b and c of the module docstring)
         from an initial T_query_match (3,): the sinogram estimate (`__call__`), or a prediction
         (`initial_quality` NaN; `radar_slam.loops.tracking`), which also seeds the registration
-        (its coarse peak searched within `refinement.translation.hint_radius_m` of the
+        (its coarse peak searched within `odometry.registration.HINT_RADIUS_M` of the
         prediction). Never raises for a bad match."""
         vcfg = self.cfg.verification
         nan3 = np.full(3, np.nan)

@@ -160,6 +160,12 @@ class OdometryRun:
             "frames_per_second": frames / self.seconds if self.seconds > 0 else 0.0,
             "odometry_gaps": sum(r.gap for r in self.results),
             "keyframes": sum(r.is_keyframe for r in self.results),
+            # image registrations per scan after the first, as the odometry counted them
+            "registrations_per_scan": (
+                sum(r.registrations for r in self.results[1:]) / (len(self.results) - 1)
+                if len(self.results) > 1
+                else 0.0
+            ),
         }
         if self.metrics is not None:
             data.update(self.metrics.to_dict())

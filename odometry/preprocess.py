@@ -1,16 +1,13 @@
 """Scan conditioning: polar filtering, then windowed Cartesian images for phase correlation.
 
-Two steps, both pure:
-
 1. `preprocess_polar(scan, cfg) -> PolarScan`: azimuth rows resampled onto a uniform sweep when
    needed, range bins averaged down to about `bin_size_m` (speckle), each range bin's median over
    azimuths subtracted (ring noise: constant-range bands that do not move with the vehicle and
-   would pull phase correlation toward zero motion), an optional per-azimuth CFAR-like noise
-   floor, the saturated near range zeroed.
-2. `render_cartesian(polar, level, rotation_rad, twist)`: the backward-warped Cartesian image of a
-   `CartesianLevel` (image convention of `raplace.warp`: +x forward up, +y left to the left,
-   sensor at the centre), optionally rotated and de-skewed (`odometry.deskew`), multiplied by the
-   level's radial apodisation window.
+   would pull phase correlation toward zero motion), an optional per-azimuth noise floor, the
+   saturated near range zeroed.
+2. `render_cartesian(polar, level, rotation_rad, twist)`: the backward-warped image of a
+   `CartesianLevel` (image convention of `raplace.warp`), optionally rotated and de-skewed
+   (`odometry.deskew`), times the level's radial apodisation window.
 """
 
 from __future__ import annotations
@@ -19,7 +16,6 @@ import functools
 import math
 from dataclasses import dataclass
 
-import cv2
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +25,7 @@ from odometry.config import LevelConfig, PreprocessConfig
 from odometry.deskew import sampling_maps
 from odometry.scan import Scan
 from raplace.units import NS_PER_S
-from raplace.warp import CartesianGrid, remap, remap_wrapped, wrap_rows
+from raplace.warp import CartesianGrid, remap, remap_wrapped
 
 TWO_PI = 2.0 * np.pi
 UNIFORM_SWEEP_TOLERANCE = 0.05
@@ -37,7 +33,7 @@ UNIFORM_SWEEP_TOLERANCE = 0.05
 fraction of the azimuth step."""
 MIN_AZIMUTHS = 8
 MAX_UINT16_SUM_FACTOR = 257
-"""Up to this many uint8 bins add up exactly in a uint16."""
+"""Up to this many uint8 bins add up in a uint16."""
 
 FloatImage = NDArray[np.float32]
 
@@ -59,9 +55,8 @@ class PolarScan:
     """A conditioned polar scan on a uniform azimuth sweep.
 
     Attributes:
-        image: (n_azimuths, n_bins) float32 non-negative intensities; row i lies at azimuth
-            `first_azimuth_rad + i * azimuth_step_rad` (CCW from +x, x-forward y-left), bin k at
-            range (k + 0.5) * bin_size_m; the rows cover one full turn.
+        wrapped_image: (n_azimuths + 1, n_bins) float32 `image` with row 0 repeated at the end
+            (`raplace.warp`'s seam layout, for its many renders).
         first_azimuth_rad: azimuth of row 0 [rad].
         azimuth_step_rad: signed step between rows [rad]; n_azimuths * |step| = 2 pi.
         bin_size_m: range bin size [m].
@@ -69,7 +64,7 @@ class PolarScan:
         timing: per-row acquisition times, or None when the scan has no azimuth times.
     """
 
-    image: FloatImage
+    wrapped_image: FloatImage
     first_azimuth_rad: float
     azimuth_step_rad: float
     bin_size_m: float
@@ -77,12 +72,15 @@ class PolarScan:
     timing: RowTiming | None
 
     @property
-    def n_azimuths(self) -> int:
-        return int(self.image.shape[0])
+    def image(self) -> FloatImage:
+        """(n_azimuths, n_bins) float32 non-negative intensities; row i lies at azimuth
+        `first_azimuth_rad + i * azimuth_step_rad` (CCW from +x, x-forward y-left), bin k at
+        range (k + 0.5) * bin_size_m; the rows cover one full turn."""
+        return self.wrapped_image[:-1]
 
     @property
-    def max_range_m(self) -> float:
-        return float(self.image.shape[1] * self.bin_size_m)
+    def n_azimuths(self) -> int:
+        return int(self.wrapped_image.shape[0] - 1)
 
     @property
     def mid_sweep_s(self) -> float | None:
@@ -92,24 +90,6 @@ class PolarScan:
         if self.timing is None:
             return None
         return self.timing.first_row_s + 0.5 * (self.n_azimuths - 1) * self.timing.row_period_s
-
-    @functools.cached_property
-    def wrapped_image(self) -> FloatImage:
-        """(n_azimuths + 1, n_bins) `image` with row 0 repeated at the end (`raplace.warp`'s
-        seam layout), made once per scan for its many renders; `preprocess_polar` makes the
-        image as the first rows of such an array, which is then used without a copy."""
-        base = self.image.base
-        n = self.n_azimuths
-        if (
-            isinstance(base, np.ndarray)
-            and base.shape == (n + 1, self.image.shape[1])
-            and base.dtype == np.float32
-            and base.flags.c_contiguous
-            and self.image.ctypes.data == base.ctypes.data
-            and np.array_equal(base[n], self.image[0])
-        ):
-            return base
-        return wrap_rows(self.image)
 
 
 @dataclass(frozen=True)
@@ -127,10 +107,6 @@ class CartesianLevel:
     range_m: FloatImage
     bearing_rad: FloatImage
     window: FloatImage
-
-    @property
-    def size_px(self) -> int:
-        return self.grid.size_px
 
     @property
     def cell_m(self) -> float:
@@ -221,7 +197,7 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
         The conditioned scan on uniform azimuths with bins of about `cfg.bin_size_m`.
 
     Raises:
-        OdometryError: inconsistent shapes or geometry.
+        OdometryError: inconsistent shapes, dtype or geometry.
     """
     polar = np.asarray(scan.polar)
     az = np.asarray(scan.azimuths_rad, dtype=np.float64)
@@ -230,6 +206,8 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
             f"polar must be (n_azimuths, n_bins) with one azimuth per row; got polar "
             f"{polar.shape}, azimuths {az.shape}"
         )
+    if polar.dtype != np.uint8:
+        raise OdometryError(f"polar must be uint8, got {polar.dtype}")
     if polar.shape[0] < MIN_AZIMUTHS or scan.range_resolution_m <= 0:
         raise OdometryError(
             f"need >= {MIN_AZIMUTHS} azimuths and a positive range resolution, got "
@@ -243,31 +221,32 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     n_bins = min(polar.shape[1], int(np.ceil(cfg.max_range_m / res))) // factor * factor
     if n_bins < factor:
         raise OdometryError(f"scan has {polar.shape[1]} bins: too few for max_range_m")
-    sums = block_sums(polar[:, :n_bins], factor)
-    # The exact uint16 sums feed the ring median and the conditioning kernel directly (their
-    # means are made there); otherwise the float means, resampled onto the uniform rows.
-    source: NDArray = sums if sums is not None else block_mean(polar[:, :n_bins], factor)
-    scale = np.float32(1.0 / factor) if sums is not None else np.float32(1.0)
+    sums = _block_sums(polar[:, :n_bins], factor)
+    # The bin means are sums * scale, made in `_condition_rows` from the exact integer sums
+    # (their median by counting); resampled rows need the float means.
+    source: NDArray = sums
+    scale = np.float32(1.0 / factor)
+    mid = polar.shape[0] // 2
+    ring = np.zeros(sums.shape[1], dtype=np.float32)
     if not np.array_equal(source_rows, np.arange(len(source_rows))):
-        image = source * scale if sums is not None else source
-        sums, source, scale = None, image, np.float32(1.0)  # the rows are resampled below
-        rows = np.broadcast_to(source_rows.astype(np.float32)[:, None], image.shape)
-        cols = np.broadcast_to(np.arange(image.shape[1], dtype=np.float32), image.shape)
-        source = remap(image, np.ascontiguousarray(cols), np.ascontiguousarray(rows))
+        means = np.multiply(sums, scale, dtype=np.float32)
+        rows = np.broadcast_to(source_rows.astype(np.float32)[:, None], means.shape)
+        cols = np.broadcast_to(np.arange(means.shape[1], dtype=np.float32), means.shape)
+        source = remap(means, np.ascontiguousarray(cols), np.ascontiguousarray(rows))
+        scale = np.float32(1.0)
+        if cfg.ring_noise_removal:
+            ring = np.partition(source, mid, axis=0)[mid]
+    elif cfg.ring_noise_removal:
+        levels = int(np.iinfo(np.uint8).max) * factor + 1
+        # The mean map is monotonic: the median of the means is the mean of the median sum.
+        ring = np.multiply(_column_order_statistic(sums, mid, levels), scale, dtype=np.float32)
     bin_size = factor * res
     near = min(source.shape[1], int(np.ceil(cfg.min_range_m / bin_size)))
-
-    ring = (
-        _ring_level(source, sums, factor)
-        if cfg.ring_noise_removal
-        else np.zeros(source.shape[1], dtype=np.float32)
-    )
     wrapped = np.empty((source.shape[0] + 1, source.shape[1]), dtype=np.float32)
-    image = wrapped[:-1]  # the seam row is filled below (see `PolarScan.wrapped_image`)
-    _condition_rows(source, scale, ring, near, float(cfg.noise_floor_sigmas), image)
-    wrapped[-1] = image[0]
+    _condition_rows(source, scale, ring, near, float(cfg.noise_floor_sigmas), wrapped[:-1])
+    wrapped[-1] = wrapped[0]
     return PolarScan(
-        image=image,
+        wrapped_image=wrapped,
         first_azimuth_rad=first,
         azimuth_step_rad=step,
         bin_size_m=bin_size,
@@ -304,57 +283,21 @@ def _condition_rows(source, scale, ring, near, floor_sigmas, out):  # type: igno
             out[i, j] = max(out[i, j] - floor, np.float32(0.0))
 
 
-def block_mean(polar: NDArray, factor: int) -> FloatImage:
-    """(n_azimuths, n_bins // factor) float32 means of `factor` adjacent range bins.
-
-    Equal to OpenCV's INTER_AREA resize (a float32 sum times the float32 1 / factor); a uint8
-    scan is summed in uint16 first (`block_sums`), which is exact and several times faster.
-    """
-    sums = block_sums(polar, factor)
-    if sums is not None:
-        return _mean_of_sums(sums, factor)
-    n_bins = polar.shape[1] // factor * factor
-    image = np.array(polar[:, :n_bins], dtype=np.float32)
-    if factor == 1:
-        return image
-    size = (n_bins // factor, polar.shape[0])
-    return np.asarray(cv2.resize(image, size, interpolation=cv2.INTER_AREA), np.float32)
-
-
-def block_sums(polar: NDArray, factor: int) -> NDArray[np.uint16] | None:
-    """(n_azimuths, n_bins // factor) exact uint16 sums of `factor` adjacent bins of a uint8
-    scan (None for any other dtype, or more bins than a uint16 can sum)."""
-    if polar.dtype != np.uint8 or factor > MAX_UINT16_SUM_FACTOR:
-        return None
-    n_bins = polar.shape[1] // factor * factor
-    sums = polar[:, 0:n_bins:factor].astype(np.uint16)
+def _block_sums(polar: NDArray[np.uint8], factor: int) -> NDArray[np.unsignedinteger]:
+    """(n_azimuths, n_bins / factor) exact integer sums of `factor` adjacent bins (n_bins a
+    multiple of factor); several times faster than a float area resize, which their means equal."""
+    sums = polar[:, ::factor].astype(np.uint16 if factor <= MAX_UINT16_SUM_FACTOR else np.uint32)
     for k in range(1, factor):
-        sums += polar[:, k:n_bins:factor]
+        sums += polar[:, k::factor]
     return sums
-
-
-def _mean_of_sums(sums: NDArray[np.uint16], factor: int) -> FloatImage:
-    """`block_mean` from `block_sums`: a monotonic map, so it commutes with order statistics."""
-    return np.multiply(sums, np.float32(1.0 / factor), dtype=np.float32)
-
-
-def _ring_level(image: FloatImage, sums: NDArray[np.uint16] | None, factor: int) -> FloatImage:
-    """(n_bins,) median over azimuths of every range bin of `image` (ring noise).
-
-    With the bins' uint16 sums (`image` is `_mean_of_sums(sums)`), the exact median comes from
-    per-bin counts of the sums instead of a partition of the floats.
-    """
-    mid = image.shape[0] // 2
-    if sums is None:
-        return np.partition(image, mid, axis=0)[mid]
-    levels = int(np.iinfo(np.uint8).max) * factor + 1
-    return _mean_of_sums(column_order_statistic(sums, mid, levels), factor)
 
 
 @numba.njit(nogil=True, cache=True)
 def _column_order_statistic(values, rank, levels):  # type: ignore[no-untyped-def]  # fmt: skip
+    """(n_cols,) the `rank`-th smallest value of each column of `values` (n_rows, n_cols), all
+    below `levels`: `np.partition(values, rank, axis=0)[rank]` by counting (linear time)."""
     n_rows, n_cols = values.shape
-    out = np.empty(n_cols, dtype=np.uint16)
+    out = np.empty_like(values[0])
     counts = np.zeros(levels, dtype=np.int32)
     for j in range(n_cols):
         counts[:] = 0
@@ -367,20 +310,6 @@ def _column_order_statistic(values, rank, levels):  # type: ignore[no-untyped-de
                 out[j] = v
                 break
     return out
-
-
-def column_order_statistic(
-    values: NDArray[np.uint16], rank: int, levels: int
-) -> NDArray[np.uint16]:
-    """(n_cols,) the `rank`-th smallest (0-based) value of each column of `values`
-    (n_rows, n_cols) uint16 < `levels`, i.e. `np.partition(values, rank, axis=0)[rank]`, by
-    counting (linear time, compiled, releases the GIL)."""
-    if not 0 <= rank < values.shape[0]:
-        raise ValueError(f"rank {rank} outside 0..{values.shape[0] - 1}")
-    if values.size and int(values.max()) >= levels:
-        raise ValueError(f"values must be below {levels}")
-    result: NDArray[np.uint16] = _column_order_statistic(values, int(rank), int(levels))
-    return result
 
 
 def sample_scan(

@@ -1,7 +1,8 @@
 """The odometry's fast paths equal the straightforward computations they replace.
 
-Bit for bit: the uint16 block mean against OpenCV's area resize, the per-scan caches (wrapped
-polar image, refinement spectrum) against fresh computations. To float32 precision (the compiled
+Bit for bit: the uint16 bin sums and the counting ring median against OpenCV's area resize and a
+partition, the per-scan caches (wrapped polar image, refinement spectrum) against fresh
+computations. To float32 precision (the compiled
 kernels round differently from numpy's SIMD loops): the sampling maps (against float64 numpy),
 the cross-power spectra of the 2-D and 1-D phase correlations, the peak statistics, the row
 spectra and the Fourier-Mellin log magnitude.
@@ -30,15 +31,7 @@ from odometry.phase_correlation import (
     locate_peak,
     locate_peak_1d,
 )
-from odometry.preprocess import (
-    _ring_level,
-    block_mean,
-    block_sums,
-    cartesian_level,
-    column_order_statistic,
-    preprocess_polar,
-    render_cartesian,
-)
+from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
 from odometry.registration import PreparedScan, _residual_rotation
 from odometry.rotation import (
     ROTATION,
@@ -47,7 +40,7 @@ from odometry.rotation import (
     polar_grid,
     refine_rotation,
 )
-from raplace.warp import remap, remap_wrapped, wrap_rows
+from raplace.warp import wrap_rows
 
 N_AZ = 400
 SWEEP_S = 0.25
@@ -114,21 +107,33 @@ def test_sampling_map_kernel_equals_float64_formulas(deskew: bool) -> None:
                 assert np.abs(bins - plain_bins).max() > 0.1
 
 
-@pytest.mark.parametrize("factor", [1, 2, 3, 4, 5])
-def test_uint16_block_mean_equals_area_resize(factor: int) -> None:
+@pytest.mark.parametrize("ring", [False, True])
+@pytest.mark.parametrize("factor", [1, 2, 3, 5])
+def test_bin_means_and_ring_median_equal_area_resize_and_partition(factor: int, ring: bool) -> None:
     rng = np.random.default_rng(factor)
-    polar = rng.integers(0, 256, (64, 203), dtype=np.uint8)
+    polar = rng.integers(0, 256, (N_AZ, 600), dtype=np.uint8)
+    polar[:, 100:200] = rng.integers(0, 3, (N_AZ, 100))  # many ties, as in radar noise
     polar[:, :7] = 255  # saturated sums
+    scan = FakeScan(0, polar, clockwise_azimuths(N_AZ), 0.05)
+    cfg = PreprocessConfig(
+        bin_size_m=0.05 * factor,
+        min_range_m=0.0,
+        max_range_m=100.0,
+        ring_noise_removal=ring,
+        noise_floor_sigmas=-1.0,
+    )
     n_bins = polar.shape[1] // factor * factor
     expected = cv2.resize(
         polar[:, :n_bins].astype(np.float32),
-        (n_bins // factor, polar.shape[0]),
+        (n_bins // factor, N_AZ),
         interpolation=cv2.INTER_AREA,
     )
-    mean = block_mean(polar, factor)
-    assert mean.dtype == np.float32
-    np.testing.assert_array_equal(mean, expected)
-    np.testing.assert_array_equal(block_mean(polar.astype(np.float32), factor), expected)
+    if ring:
+        median = np.partition(expected, N_AZ // 2, axis=0)[N_AZ // 2]
+        expected = np.maximum(expected - median, 0.0)
+    conditioned = preprocess_polar(scan, cfg)
+    assert conditioned.image.dtype == np.float32
+    np.testing.assert_array_equal(conditioned.image, expected)
 
 
 def _blob_scan(seed: int, timestamp_ns: int = 0) -> FakeScan:
@@ -147,21 +152,10 @@ def _blob_scan(seed: int, timestamp_ns: int = 0) -> FakeScan:
     )
 
 
-def test_wrapped_polar_cache_equals_fresh_wrap_and_remap() -> None:
+def test_wrapped_polar_image_repeats_row_0() -> None:
     polar = preprocess_polar(_blob_scan(1), PreprocessConfig(bin_size_m=0.2, max_range_m=80.0))
     np.testing.assert_array_equal(polar.wrapped_image, wrap_rows(polar.image))
-    assert polar.wrapped_image is polar.wrapped_image  # made once
-    assert np.shares_memory(polar.wrapped_image, polar.image)  # preprocess made it: no copy
-    # An image that is not the head of such an array is wrapped afresh.
-    other = dataclasses.replace(polar, image=polar.image.copy())
-    np.testing.assert_array_equal(other.wrapped_image, polar.wrapped_image)
-    assert not np.shares_memory(other.wrapped_image, other.image)
-    rng = np.random.default_rng(2)
-    bins = rng.uniform(-2.0, polar.image.shape[1] + 2.0, (50, 60)).astype(np.float32)
-    rows = rng.uniform(0.0, N_AZ, (50, 60)).astype(np.float32)
-    np.testing.assert_array_equal(
-        remap_wrapped(polar.wrapped_image, bins, rows), remap(polar.image, bins, rows)
-    )
+    assert np.shares_memory(polar.wrapped_image, polar.image)  # one array, no copy
 
 
 def test_prepared_scan_caches_equal_fresh_computations() -> None:
@@ -179,29 +173,6 @@ def test_prepared_scan_caches_equal_fresh_computations() -> None:
     points = grid.shifted(1.5, 0.2)
     fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), ROTATION)
     assert cached == fresh
-
-
-@pytest.mark.parametrize("rank", [0, 1, 100, 200, 399])
-def test_counting_order_statistic_equals_partition(rank: int) -> None:
-    rng = np.random.default_rng(rank)
-    values = rng.integers(0, 766, (400, 120)).astype(np.uint16)
-    values[:, :40] = rng.integers(0, 4, (400, 40))  # many ties, as in radar noise
-    values[:, 40] = 765
-    expected = np.partition(values, rank, axis=0)[rank]
-    np.testing.assert_array_equal(column_order_statistic(values, rank, 766), expected)
-
-
-def test_ring_median_from_counts_equals_float_partition() -> None:
-    rng = np.random.default_rng(5)
-    polar = rng.integers(0, 256, (N_AZ, 600), dtype=np.uint8)
-    polar[:, 100:200] = rng.integers(0, 3, (N_AZ, 100))
-    for factor in (1, 3):
-        sums = block_sums(polar, factor)
-        assert sums is not None
-        image = block_mean(polar, factor)
-        expected = np.partition(image, N_AZ // 2, axis=0)[N_AZ // 2]
-        np.testing.assert_array_equal(_ring_level(image, sums, factor), expected)
-        np.testing.assert_array_equal(_ring_level(image, None, factor), expected)
 
 
 def _correlate_numpy(

@@ -5,8 +5,8 @@ The DFT of a real (H, W) image (H, W even) is Hermitian, so H * W real numbers h
 of the frequencies k_c = 1 .. W / 2 - 1 for every row frequency; column 0 (k_c = 0) and column
 W - 1 (k_c = W / 2) hold the real values of k_r = 0 (row 0) and k_r = H / 2 (row H - 1) and the
 (Re, Im) pairs of k_r = 1 .. H / 2 - 1 in rows (2 k_r - 1, 2 k_r). Computing and inverting a packed
-spectrum writes half the memory of a complex one; `pack` and `unpack` convert from and to the
-half spectrum of `numpy.fft.rfft2` ((H, W // 2 + 1) complex).
+spectrum writes half the memory of a complex one; `pack` converts from the half spectrum of
+`numpy.fft.rfft2` ((H, W // 2 + 1) complex).
 """
 
 from __future__ import annotations
@@ -18,14 +18,11 @@ from numpy.typing import NDArray
 PackedSpectrum = NDArray[np.float32]
 
 
-def _check_even(shape: tuple[int, ...]) -> None:
+def forward(image: NDArray[np.float32]) -> PackedSpectrum:
+    """Packed spectrum (H, W) float32 of a real (H, W) float32 image (H, W even, >= 4)."""
+    shape = image.shape
     if len(shape) != 2 or shape[0] % 2 or shape[1] % 2 or min(shape) < 4:
         raise ValueError(f"packed spectra need a 2-D image with even sides >= 4, got {shape}")
-
-
-def forward(image: NDArray[np.float32]) -> PackedSpectrum:
-    """Packed spectrum (H, W) float32 of a real (H, W) float32 image (H, W even)."""
-    _check_even(image.shape)
     return np.asarray(cv2.dft(np.ascontiguousarray(image, dtype=np.float32)), dtype=np.float32)
 
 
@@ -36,10 +33,9 @@ def inverse(packed: PackedSpectrum) -> NDArray[np.float32]:
 
 
 def pack(half: NDArray[np.complexfloating]) -> PackedSpectrum:
-    """The packed spectrum of a half spectrum (H, W // 2 + 1) of a real (H, W) image, W = 2 (
-    n_cols - 1); the imaginary parts at the four real positions are dropped."""
+    """The packed spectrum (H, W) of a half spectrum (H, W // 2 + 1) of a real image; the
+    imaginary parts at the four real positions are dropped."""
     h, w = half.shape[0], 2 * (half.shape[1] - 1)
-    _check_even((h, w))
     out = np.empty((h, w), dtype=np.float32)
     out[:, 1 : w - 1 : 2] = half[:, 1 : w // 2].real
     out[:, 2 : w - 1 : 2] = half[:, 1 : w // 2].imag
@@ -52,38 +48,9 @@ def pack(half: NDArray[np.complexfloating]) -> PackedSpectrum:
     return out
 
 
-def unpack(packed: PackedSpectrum) -> NDArray[np.complex64]:
-    """The half spectrum (H, W // 2 + 1) complex64 (`numpy.fft.rfft2` layout) of a packed one."""
-    h, w = packed.shape
-    _check_even((h, w))
-    half = np.empty((h, w // 2 + 1), dtype=np.complex64)
-    half[:, 1 : w // 2] = packed[:, 1 : w - 1 : 2] + 1j * packed[:, 2 : w - 1 : 2]
-    for col, k in ((0, 0), (w - 1, w // 2)):
-        column = np.empty(h, dtype=np.complex64)
-        column[0] = packed[0, col]
-        column[1 : h // 2] = packed[1 : h - 1 : 2, col] + 1j * packed[2 : h - 1 : 2, col]
-        column[h // 2] = packed[h - 1, col]
-        column[h // 2 + 1 :] = np.conj(column[1 : h // 2][::-1])  # Hermitian along the rows
-        half[:, k] = column
-    return half
-
-
 def forward_rows(image: NDArray[np.float32]) -> PackedSpectrum:
     """Packed spectra (rows, n) float32 of every row of a real (rows, n) float32 image: per row
     Re(0), then (Re, Im) pairs of the frequencies 1 .. (n - 1) // 2, then Re(n / 2) when n is
     even (OpenCV's 1-D CCS layout)."""
     image = np.ascontiguousarray(image, dtype=np.float32)
     return np.asarray(cv2.dft(image, flags=cv2.DFT_ROWS), dtype=np.float32)
-
-
-def unpack_rows(packed: PackedSpectrum) -> NDArray[np.complex64]:
-    """The half spectra (rows, n // 2 + 1) complex64 (`numpy.fft.rfft(axis=1)` layout) of
-    `forward_rows` spectra."""
-    n = packed.shape[1]
-    half = np.zeros((packed.shape[0], n // 2 + 1), dtype=np.complex64)
-    half[:, 0] = packed[:, 0]
-    pairs = (n - 1) // 2
-    half[:, 1 : pairs + 1] = packed[:, 1 : 2 * pairs : 2] + 1j * packed[:, 2 : 2 * pairs + 1 : 2]
-    if n % 2 == 0:
-        half[:, n // 2] = packed[:, n - 1]
-    return half

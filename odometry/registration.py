@@ -70,9 +70,6 @@ FloatArray = NDArray[np.float64]
 PEAK_SMOOTHING_PX = 1.0
 """Gaussian width [pixels] of a translation correlation peak (low-pass on the normalised
 cross-power spectrum), so that a 3 x 3 Gaussian fit locates it to a fraction of a pixel."""
-WHITENING = 1.0
-"""Exponent of the spectral normalisation: 1 is pure phase correlation (0 would be plain
-cross-correlation, dominated by the brightest returns)."""
 FINE_SEARCH_PX = 6
 """The fine peak is searched within this many fine pixels of the coarse estimate (the coarse
 peak's error is under a coarse pixel, about three fine ones)."""
@@ -348,9 +345,7 @@ def _coarse_translation(
     radius = None if hint_xy is None else HINT_RADIUS_M / level.cell_m
     hypotheses = []
     for turn in turns:
-        surface = correlate(
-            ref.coarse_spectrum, spectrum, shape, PEAK_SMOOTHING_PX, WHITENING, turn != 0.0
-        )
+        surface = correlate(ref.coarse_spectrum, spectrum, shape, PEAK_SMOOTHING_PX, turn != 0.0)
         hypotheses.append((locate_peak(surface, PEAK_SMOOTHING_PX, centre, radius), turn))
     peak, turn = max(hypotheses, key=lambda h: h[0].quality)
     return peak, float(wrap_angle(angle_rad + turn))
@@ -363,7 +358,7 @@ def _fine_translation(
     level = cartesian_level(cfg.fine)
     fine = cur._render(level, yaw)
     centre = t_coarse / level.cell_m
-    surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX, WHITENING)
+    surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX)
     peak = locate_peak(
         surface, PEAK_SMOOTHING_PX, (float(centre[0]), float(centre[1])), FINE_SEARCH_PX
     )

@@ -1,15 +1,15 @@
-"""Rotation between two scans by Fourier-Mellin: the angle of their magnitude spectra.
+"""Rotation between two scans by Fourier-Mellin, then a refinement on a polar grid.
 
 The magnitude of an image's spectrum ignores translation and turns with the image. Resampled on a
 polar grid (angle x radius), a rotation becomes a shift along the angle axis, found by phase
 correlation along that axis (summed over radii). A real image's magnitude spectrum is symmetric
 under a half turn, so the angle axis spans [0, pi) and the rotation is known modulo pi: the caller
-tests both hypotheses (`odometry.registration` keeps the one with the stronger translation peak).
+tests both hypotheses.
 
 Fourier-Mellin alone locks toward zero for small rotations (the pixel grid and the window are
-fixed in both images), so `refine_rotation` follows once the translation is known: both scans are
-sampled on one polar grid centred on the reference sensor (`PolarGrid`), the moved one through the
-current motion estimate; the remaining rotation is then a pure shift along the angle axis.
+fixed in both images), so `refine_rotation_against` follows once the translation is known: both
+scans are sampled on one polar grid centred on the reference sensor (`PolarGrid`), the moved one
+through the current motion estimate; the remaining rotation is a pure shift along the angle axis.
 """
 
 from __future__ import annotations
@@ -24,7 +24,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.packed import PackedSpectrum, forward_rows
-from odometry.phase_correlation import correlate_1d, locate_peak_1d
+from odometry.phase_correlation import (
+    LOG_FLOOR_FRACTION,
+    MIN_CURVATURE,
+    PEAK_EXCLUSION_SIGMAS,
+    SPECTRUM_EPS,
+    TINY,
+    WIDE_PEAK_VARIANCE_PX2,
+    std_outside_rows,
+)
 
 Signature = PackedSpectrum
 """Packed row spectra ((n_radii, n_angles) float32, `odometry.packed.forward_rows`)."""
@@ -32,40 +40,31 @@ Signature = PackedSpectrum
 
 @dataclass(frozen=True)
 class RotationSettings:
-    """Fourier-Mellin rotation settings (internal: `ROTATION`): polar resampling of the coarse
-    image's magnitude spectrum and the refinement that follows.
+    """Fourier-Mellin rotation settings (internal: `ROTATION`).
 
     Attributes:
         n_angles: samples of the spectrum's angle over [0, pi) (resolution pi / n_angles).
         n_radii: samples of the spectrum's radius.
-        min_frequency: lowest spectral radius used, as a fraction of Nyquist (skips the
-            window-dominated low frequencies).
-        max_frequency: highest spectral radius used, as a fraction of Nyquist.
-        log_radius: sample the radius logarithmically (log-polar, PhaRaO) instead of linearly.
-        smoothing_bins: Gaussian width [angle bins] of the correlation peak (low-pass on the
-            cross-power spectrum), for a smooth peak and a sub-bin fit.
-        refine: after the coarse translation, refine the rotation by angular correlation of
-            both scans resampled on a polar grid about the reference sensor (translation
-            removed): Fourier-Mellin alone is biased toward zero by the fixed pixel grid.
-        refine_n_angles: angular samples of that polar grid over a full turn.
+        min_frequency, max_frequency: spectral radii used, as fractions of Nyquist (the lowest
+            frequencies are dominated by the window).
+        smoothing_bins: Gaussian width [angle bins] of the correlation peak.
+        refine: after the coarse translation, refine the rotation on the polar grid about the
+            reference sensor (`refine_rotation_against`).
+        refine_n_angles: angular samples of that grid over a full turn.
         refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
         refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
-        refine_passes: at most this many refinements in a row; each after the first
-            re-estimates the coarse translation at the refined yaw (near the previous one)
-            first. The first coarse translation is made at the Fourier-Mellin yaw, which locks
-            toward zero for rotations below about a degree; its error leaks into a single
-            refinement as a rotation error proportional to the rotation (see
-            `scripts/diagnose_rotation_bias.py`). 2 removes that error
-            (`tests/test_odometry_rotation_bias.py`).
-        refine_repeat_min_deg: the refinement is repeated only while its last correction was
-            larger than this [deg] (the translation was made at a yaw off by that much).
+        refine_passes: at most this many refinements in a row, each after the first preceded by
+            a coarse translation at the refined yaw: the first translation is made at the
+            Fourier-Mellin yaw, whose error would otherwise leak into the refined rotation in
+            proportion to the rotation.
+        refine_repeat_min_deg: a refinement is repeated only while its last correction was
+            larger than this [deg].
     """
 
     n_angles: int = 720
     n_radii: int = 96
     min_frequency: float = 0.05
     max_frequency: float = 0.9
-    log_radius: bool = False
     smoothing_bins: float = 1.0
     refine: bool = True
     refine_n_angles: int = 720
@@ -84,10 +83,11 @@ follow the image levels, not a sensor or a vehicle)."""
 
 @dataclass(frozen=True)
 class RotationEstimate:
-    """Rotation of a scan relative to a reference, modulo pi.
+    """Rotation of a scan relative to a reference.
 
     Attributes:
-        angle_rad: rotation in [-pi/2, pi/2) [rad] (the other hypothesis is angle_rad + pi).
+        angle_rad: rotation [rad]: in [-pi/2, pi/2) from Fourier-Mellin (the other hypothesis
+            is angle_rad + pi), in [-pi, pi) from a refinement.
         sigma_rad: standard deviation from the correlation peak [rad].
         quality: peak-to-noise ratio of the angular correlation peak.
     """
@@ -97,45 +97,29 @@ class RotationEstimate:
     quality: float
 
 
-@dataclass(frozen=True)
-class _PolarSampler:
-    map_cols: NDArray[np.float32]
-    map_rows: NDArray[np.float32]
-
-
 @functools.lru_cache(maxsize=8)
-def _sampler(size_px: int, cfg: RotationSettings) -> _PolarSampler:
-    """cv2.remap maps from (radius, angle) to the row-centred half spectrum of a square image."""
+def _sampler(
+    size_px: int, cfg: RotationSettings
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """cv2.remap maps (cols, rows) from (radius, angle) to the row-centred half spectrum of a
+    square image."""
     nyquist = size_px / 2.0
-    lo, hi = cfg.min_frequency * nyquist, cfg.max_frequency * nyquist
-    if cfg.log_radius:
-        radii = np.geomspace(max(lo, 1.0), hi, cfg.n_radii)
-    else:
-        radii = np.linspace(lo, hi, cfg.n_radii)
+    radii = np.linspace(cfg.min_frequency * nyquist, cfg.max_frequency * nyquist, cfg.n_radii)
     angles = np.arange(cfg.n_angles) * (np.pi / cfg.n_angles)
     k_row = radii[:, None] * np.cos(angles)[None, :]
     k_col = radii[:, None] * np.sin(angles)[None, :]
-    return _PolarSampler(
-        map_cols=k_col.astype(np.float32), map_rows=(k_row + nyquist).astype(np.float32)
-    )
+    return k_col.astype(np.float32), (k_row + nyquist).astype(np.float32)
 
 
 def signature(spectrum: PackedSpectrum, cfg: RotationSettings) -> Signature:
-    """Rotation signature of an image from its packed spectrum (size_px, size_px).
-
-    Returns (n_radii, n_angles) float32: the packed angular spectra (`forward_rows`) of the
-    polar-resampled log magnitude spectrum.
-    """
+    """Rotation signature of an image from its packed spectrum (size_px, size_px): the packed
+    angular spectra (n_radii, n_angles) float32 of its polar-resampled log magnitude spectrum."""
     size = spectrum.shape[0]
     centred = np.empty((size, size // 2 + 1), dtype=np.float32)
     _centred_log_magnitude(spectrum, centred)
-    sampler = _sampler(size, cfg)
+    map_cols, map_rows = _sampler(size, cfg)
     polar = cv2.remap(
-        centred,
-        sampler.map_cols,
-        sampler.map_rows,
-        interpolation=cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_REPLICATE,
+        centred, map_cols, map_rows, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
     )
     return forward_rows(np.asarray(polar, dtype=np.float32))
 
@@ -168,15 +152,7 @@ def _centred_log_magnitude(packed, out):  # type: ignore[no-untyped-def]  # fmt:
 def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationSettings) -> RotationEstimate:
     """Rotation of the `mov` image relative to `ref` (modulo pi) from their signatures."""
     curve = correlate_1d(ref, mov, cfg.n_angles, cfg.smoothing_bins)
-    peak = locate_peak_1d(curve, cfg.smoothing_bins)
-    step = np.pi / cfg.n_angles
-    # The spectrum's angle runs from the row- toward the column-frequency axis: the opposite
-    # sense to a CCW turn in the image convention (+x up, +y left).
-    return RotationEstimate(
-        angle_rad=float(-peak.shift * step),
-        sigma_rad=float(np.sqrt(peak.variance()) * step),
-        quality=float(peak.quality),
-    )
+    return _rotation_of_peak(curve, cfg.smoothing_bins, np.pi / cfg.n_angles)
 
 
 @dataclass(frozen=True)
@@ -190,10 +166,6 @@ class PolarGrid:
     y_m: NDArray[np.float32]
     range_m: NDArray[np.float32]
     bearing_rad: NDArray[np.float32]
-
-    @property
-    def n_angles(self) -> int:
-        return int(self.x_m.shape[1])
 
     def shifted(
         self, dx_m: float, dy_m: float
@@ -233,13 +205,14 @@ def angular_spectrum(image: NDArray[np.float32]) -> PackedSpectrum:
     return forward_rows(image)
 
 
-def refine_rotation(
-    ref: NDArray[np.float32], mov: NDArray[np.float32], cfg: RotationSettings
+def refine_rotation_against(
+    ref_spectrum: PackedSpectrum, mov: NDArray[np.float32], cfg: RotationSettings
 ) -> RotationEstimate:
-    """Residual rotation of `mov` relative to `ref`, both sampled on the same `PolarGrid`.
+    """Residual rotation of `mov` relative to the reference, both sampled on the same
+    `PolarGrid`.
 
     Args:
-        ref: (n_ranges, n_angles) the reference scan on the grid.
+        ref_spectrum: `angular_spectrum` of the reference scan on the grid.
         mov: (n_ranges, n_angles) the moved scan on the grid, rendered through the current
             motion estimate (so only a residual rotation remains).
         cfg: rotation settings.
@@ -247,22 +220,86 @@ def refine_rotation(
     Returns:
         The residual rotation in [-pi, pi) [rad] to add to the estimate's yaw.
     """
-    return refine_rotation_against(angular_spectrum(ref), mov, cfg)
-
-
-def refine_rotation_against(
-    ref_spectrum: PackedSpectrum, mov: NDArray[np.float32], cfg: RotationSettings
-) -> RotationEstimate:
-    """`refine_rotation` with the reference given by its `angular_spectrum` (kept by a
-    reference scan that many scans are registered against)."""
     n = mov.shape[1]
     curve = correlate_1d(ref_spectrum, angular_spectrum(mov), n, cfg.refine_smoothing_bins)
-    peak = locate_peak_1d(curve, cfg.refine_smoothing_bins)
-    step = 2.0 * np.pi / n
-    # mov(bearing) = ref(bearing - d): the moved content sits d columns further CCW, i.e. the
-    # rendering turned it too far by d; the yaw needs -d.
+    return _rotation_of_peak(curve, cfg.refine_smoothing_bins, 2.0 * np.pi / n)
+
+
+def _rotation_of_peak(
+    curve: NDArray[np.float64], smoothing: float, step_rad: float
+) -> RotationEstimate:
+    """The rotation at the peak of an angular correlation (`correlate_1d`, samples `step_rad`
+    apart, peak width `smoothing` samples), located by a parabola through the log of its 3 top
+    samples.
+
+    The angle is minus the correlation's shift: in a signature the spectrum's angle runs from the
+    row- toward the column-frequency axis, against a CCW turn in the image convention; on a
+    `PolarGrid` content d samples further CCW was rendered turned too far by d.
+    """
+    n = len(curve)
+    i0 = int(np.argmax(curve))
+    height = float(curve[i0])
+    floor = max(height, TINY) * LOG_FLOOR_FRACTION
+    logt = [math.log(max(float(curve[(i0 + k) % n]), floor)) for k in (-1, 0, 1)]
+    second = logt[0] - 2.0 * logt[1] + logt[2]
+    offset = 0.0
+    if second < -MIN_CURVATURE:
+        offset = min(max(0.5 * (logt[0] - logt[2]) / second, -1.0), 1.0)
+    exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * smoothing)) + 1
+    # The samples as the rows of a one-column surface: the same noise as the 2-D peaks.
+    noise = float(std_outside_rows(curve.reshape(-1, 1), i0, exclude))
+    quality = height / noise if noise > 0 else 0.0
+    shift = (i0 + offset + n / 2.0) % n - n / 2.0
+    width2 = 1.0 / -second if -second > MIN_CURVATURE else WIDE_PEAK_VARIANCE_PX2  # [sample^2]
     return RotationEstimate(
-        angle_rad=float(-peak.shift * step),
-        sigma_rad=float(np.sqrt(peak.variance()) * step),
-        quality=float(peak.quality),
+        angle_rad=float(-shift * step_rad),
+        sigma_rad=float(np.sqrt(width2 / max(quality, 1.0) ** 2) * step_rad),
+        quality=float(quality),
     )
+
+
+def correlate_1d(
+    s_ref: PackedSpectrum, s_mov: PackedSpectrum, n: int, smoothing: float
+) -> NDArray[np.float64]:
+    """Summed phase correlation (n,) of row spectra (`forward_rows`, (rows, n)); it peaks at d
+    when mov(t) = ref(t - d).
+
+    Each element of the cross-power spectrum is whitened, the rows are summed, the zero
+    frequency is dropped (it carries no shift), and a Gaussian of `smoothing` samples shapes the
+    peak.
+    """
+    summed_re = np.zeros(n // 2 + 1)
+    summed_im = np.zeros(n // 2 + 1)
+    _summed_cross_power(s_ref, s_mov, summed_re, summed_im)
+    summed = (summed_re + 1j * summed_im) * _gaussian_lowpass_1d(n, float(smoothing))
+    return np.fft.irfft(summed, n=n) / max(1, s_ref.shape[0])
+
+
+@functools.lru_cache(maxsize=16)
+def _gaussian_lowpass_1d(n: int, smoothing: float) -> NDArray[np.float64]:
+    weights = np.exp(-2.0 * (np.pi * smoothing * np.fft.rfftfreq(n)) ** 2)
+    weights.setflags(write=False)  # shared through the cache
+    return weights
+
+
+@numba.njit(nogil=True, cache=True)
+def _summed_cross_power(s_ref, s_mov, out_re, out_im):  # type: ignore[no-untyped-def]  # fmt: skip
+    """out[k] += sum over rows of C / (|C| + eps), C = mov * conj(ref) (float32 products), for
+    the frequencies k >= 1 of packed row spectra (the zero frequency is left out)."""
+    eps = np.float32(SPECTRUM_EPS)
+    n = s_ref.shape[1]
+    pairs = (n - 1) // 2
+    for i in range(s_ref.shape[0]):
+        for k in range(1, pairs + 1):
+            m_re = s_mov[i, 2 * k - 1]
+            m_im = s_mov[i, 2 * k]
+            r_re = s_ref[i, 2 * k - 1]
+            r_im = s_ref[i, 2 * k]
+            c_re = m_re * r_re + m_im * r_im
+            c_im = m_im * r_re - m_re * r_im
+            inverse = np.float32(1.0) / (np.float32(math.sqrt(c_re * c_re + c_im * c_im)) + eps)
+            out_re[k] += c_re * inverse
+            out_im[k] += c_im * inverse
+        if n % 2 == 0:  # the real Nyquist value
+            c = s_mov[i, n - 1] * s_ref[i, n - 1]
+            out_re[n // 2] += c / (np.float32(abs(c)) + eps)

@@ -2,10 +2,9 @@
 
 Bit for bit: the uint16 bin sums and the counting ring median against OpenCV's area resize and a
 partition, the per-scan caches (wrapped polar image, refinement spectrum) against fresh
-computations. To float32 precision (the compiled
-kernels round differently from numpy's SIMD loops): the sampling maps (against float64 numpy),
-the cross-power spectra of the 2-D and 1-D phase correlations, the peak statistics, the row
-spectra and the Fourier-Mellin log magnitude.
+computations. To float32 precision (compiled float32 kernels against float64 numpy): the
+sampling maps, the cross-power spectra of the 2-D and 1-D phase correlations, the peak
+statistics, the packed spectra and the Fourier-Mellin log magnitude.
 """
 
 from __future__ import annotations
@@ -19,26 +18,24 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
 from odometry.deskew import sampling_maps
-from odometry.packed import forward_rows, inverse, pack, unpack, unpack_rows
+from odometry.packed import forward_rows, inverse, pack
 from odometry.phase_correlation import (
     PEAK_EXCLUSION_SIGMAS,
     SPECTRUM_EPS,
     correlate,
-    correlate_1d,
     forward,
-    gaussian_lowpass,
-    half_turn_ramp,
     locate_peak,
-    locate_peak_1d,
 )
 from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
 from odometry.registration import PreparedScan, _residual_rotation
 from odometry.rotation import (
     ROTATION,
     _centred_log_magnitude,
+    _rotation_of_peak,
     angular_spectrum,
+    correlate_1d,
     polar_grid,
-    refine_rotation,
+    refine_rotation_against,
 )
 from raplace.warp import wrap_rows
 
@@ -171,40 +168,34 @@ def test_prepared_scan_caches_equal_fresh_computations() -> None:
     moving = PreparedScan(preprocess_polar(_blob_scan(3, 250_000_000), cfg.preprocess), twist, cfg)
     cached = _residual_rotation(scan, moving, np.array([1.5, 0.2]), 0.05, cfg)
     points = grid.shifted(1.5, 0.2)
-    fresh = refine_rotation(scan.refine_image, moving._sample(points, 0.05), ROTATION)
+    fresh = refine_rotation_against(
+        angular_spectrum(scan.refine_image), moving._sample(points, 0.05), ROTATION
+    )
     assert cached == fresh
 
 
 def _correlate_numpy(
-    f_ref: np.ndarray,
-    f_mov: np.ndarray,
-    shape: tuple[int, int],
-    smoothing_px: float,
-    whitening: float,
-    half_turn: bool,
+    ref: np.ndarray, moved: np.ndarray, smoothing_px: float, half_turn: bool
 ) -> np.ndarray:
-    """`correlate` in plain numpy operations on half spectra."""
-    h_ref, h_mov = unpack(f_ref), unpack(f_mov)
-    if half_turn:
-        h_mov = half_turn_ramp(shape[0]) * np.conj(h_mov)
-    cross = h_mov * np.conj(h_ref)
-    if whitening > 0:
-        magnitude = np.abs(cross) + np.float32(SPECTRUM_EPS)
-        cross /= magnitude if whitening == 1.0 else magnitude**whitening
-    cross *= gaussian_lowpass(shape, smoothing_px)
-    return np.fft.irfft2(cross, s=shape)
+    """`correlate` of two images in plain float64 numpy operations."""
+    if half_turn:  # turned by pi about the centre, which lies between pixels
+        moved = moved[::-1, ::-1]
+    cross = np.fft.rfft2(moved) * np.conj(np.fft.rfft2(ref))
+    cross /= np.abs(cross) + SPECTRUM_EPS
+    fy = np.fft.fftfreq(ref.shape[0])[:, None]
+    fx = np.fft.rfftfreq(ref.shape[1])[None, :]
+    cross *= np.exp(-2.0 * (np.pi * smoothing_px) ** 2 * (fy * fy + fx * fx))
+    return np.fft.irfft2(cross, s=ref.shape)
 
 
-def _correlate_1d_numpy(
-    s_ref: np.ndarray, s_mov: np.ndarray, n: int, smoothing: float
-) -> np.ndarray:
-    """`correlate_1d` in plain numpy operations."""
-    cross = s_mov * np.conj(s_ref)
-    cross /= np.abs(cross) + np.float32(SPECTRUM_EPS)
+def _correlate_1d_numpy(ref: np.ndarray, moved: np.ndarray, smoothing: float) -> np.ndarray:
+    """`correlate_1d` of two (rows, n) images in plain float64 numpy operations."""
+    cross = np.fft.rfft(moved, axis=1) * np.conj(np.fft.rfft(ref, axis=1))
+    cross /= np.abs(cross) + SPECTRUM_EPS
     summed = cross.sum(axis=0)
     summed[0] = 0.0
-    summed *= np.exp(-2.0 * (np.pi * smoothing * np.fft.rfftfreq(n)) ** 2)
-    return np.fft.irfft(summed, n=n) / cross.shape[0]
+    summed *= np.exp(-2.0 * (np.pi * smoothing * np.fft.rfftfreq(ref.shape[1])) ** 2)
+    return np.fft.irfft(summed, n=ref.shape[1]) / ref.shape[0]
 
 
 def _relative_error(actual: np.ndarray, expected: np.ndarray) -> float:
@@ -218,32 +209,24 @@ def _shifted_pair(size: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize("half_turn", [False, True])
-@pytest.mark.parametrize("whitening", [1.0, 0.5, 0.0])
-def test_cross_power_kernel_equals_numpy_reference(half_turn: bool, whitening: float) -> None:
-    ref, moved = _shifted_pair(96, seed=int(10 * whitening) + half_turn)
-    args = (forward(ref), forward(moved), ref.shape, 1.3, whitening, half_turn)
-    surface = correlate(*args)
-    expected = _correlate_numpy(*args)
+def test_cross_power_kernel_equals_numpy_reference(half_turn: bool) -> None:
+    ref, moved = _shifted_pair(96, seed=int(half_turn))
+    if half_turn:  # a turned image, which the half-turn correlation turns back
+        moved = np.ascontiguousarray(moved[::-1, ::-1])
+    surface = correlate(forward(ref), forward(moved), ref.shape, 1.3, half_turn)
+    expected = _correlate_numpy(ref, moved, 1.3, half_turn)
     assert surface.dtype == np.float32 and surface.shape == ref.shape
     assert _relative_error(surface, expected) < 1e-6
     assert np.argmax(surface) == np.argmax(expected)
 
 
-def test_summed_angular_correlation_equals_numpy_reference() -> None:
+@pytest.mark.parametrize("n", [180, 179])
+def test_summed_angular_correlation_equals_numpy_reference(n: int) -> None:
     rng = np.random.default_rng(4)
-    polar = rng.random((40, 180), dtype=np.float32)
+    polar = rng.random((40, n), dtype=np.float32)
     turned = np.roll(polar, 7, axis=1) + rng.normal(0, 0.1, polar.shape).astype(np.float32)
-    s_ref, s_mov = forward_rows(polar), forward_rows(turned)
-    np.testing.assert_allclose(unpack_rows(s_ref), np.fft.rfft(polar, axis=1), rtol=0, atol=1e-4)
-    odd = polar[:, :179]
-    np.testing.assert_allclose(unpack_rows(forward_rows(odd)), np.fft.rfft(odd, axis=1), atol=1e-4)
-    curve = correlate_1d(s_ref, s_mov, 180, 1.0)
-    expected = _correlate_1d_numpy(unpack_rows(s_ref), unpack_rows(s_mov), 180, 1.0)
-    s_odd = forward_rows(turned[:, :179])
-    odd_curve = correlate_1d(forward_rows(odd), s_odd, 179, 1.0)
-    odd_expected = _correlate_1d_numpy(unpack_rows(forward_rows(odd)), unpack_rows(s_odd), 179, 1.0)
-    assert _relative_error(odd_curve, odd_expected) < 1e-6
-    assert _relative_error(curve, expected) < 1e-6
+    curve = correlate_1d(forward_rows(polar), forward_rows(turned), n, 1.0)
+    assert _relative_error(curve, _correlate_1d_numpy(polar, turned, 1.0)) < 1e-6
     assert int(np.argmax(curve)) == 7
 
 
@@ -263,13 +246,13 @@ def test_peak_statistics_equal_numpy_formulas() -> None:
             cols = (int(round(centre[1])) + np.arange(-6, 7)) % w
             window = surface[np.ix_(rows, cols)]
             a, b = divmod(int(np.argmax(window)), window.shape[1])
-            assert peak.height == float(window[a, b])
             i0, j0 = int(rows[a]), int(cols[b])
+        height = float(surface[i0, j0])
         keep = np.ones(h, dtype=bool)
         keep[(i0 + np.arange(-exclude, exclude + 1)) % h] = False
-        assert peak.noise == pytest.approx(float(np.std(surface[keep])), rel=1e-5)
+        assert peak.quality == pytest.approx(height / float(np.std(surface[keep])), rel=1e-5)
         patch = surface[np.ix_((i0 + np.arange(-1, 2)) % h, (j0 + np.arange(-1, 2)) % w)]
-        logp = np.log(np.maximum(patch.astype(np.float64), max(peak.height, 1e-30) * 1e-3))
+        logp = np.log(np.maximum(patch.astype(np.float64), max(height, 1e-30) * 1e-3))
         hyy = logp[2, 1] - 2.0 * logp[1, 1] + logp[0, 1]
         hxx = logp[1, 2] - 2.0 * logp[1, 1] + logp[1, 0]
         hxy = 0.25 * (logp[2, 2] - logp[2, 0] - logp[0, 2] + logp[0, 0])
@@ -283,43 +266,48 @@ def test_peak_statistics_equal_numpy_formulas() -> None:
 
 def test_centred_log_magnitude_equals_numpy() -> None:
     ref, _ = _shifted_pair(64, seed=12)
-    packed = forward(ref)
-    spectrum = unpack(packed)
+    spectrum = np.fft.rfft2(ref.astype(np.float64))
     out = np.empty(spectrum.shape, np.float32)
-    _centred_log_magnitude(packed, out)
+    _centred_log_magnitude(forward(ref), out)
     expected = np.fft.fftshift(np.log1p(np.abs(spectrum)), axes=0)
-    np.testing.assert_allclose(out, expected, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-4)  # float32 DFT
 
 
 @pytest.mark.parametrize("shape", [(4, 6), (64, 64), (96, 40)])
-def test_packed_spectrum_round_trips_through_numpy_layout(shape: tuple[int, int]) -> None:
+def test_packed_spectra_hold_the_numpy_half_spectra(shape: tuple[int, int]) -> None:
     image = np.random.default_rng(shape[0]).random(shape, dtype=np.float32)
     packed = forward(image)
-    half = np.fft.rfft2(image.astype(np.float64))
     assert packed.shape == shape and packed.dtype == np.float32
-    assert _relative_error(unpack(packed), half) < 1e-6
-    np.testing.assert_array_equal(pack(unpack(packed)), packed)
+    assert _relative_error(packed, pack(np.fft.rfft2(image.astype(np.float64)))) < 1e-6
     np.testing.assert_allclose(inverse(packed) / image.size, image, atol=1e-5)
     with pytest.raises(ValueError, match="even"):
         forward(np.zeros((5, 8), np.float32))
+    rows = np.fft.rfft(image.astype(np.float64), axis=1)  # per row: Re 0, (Re, Im) pairs, Re n/2
+    expected = np.column_stack(
+        [rows[:, 0].real, np.stack([rows.real, rows.imag], axis=2)[:, 1:-1].reshape(shape[0], -1)]
+    )
+    expected = np.column_stack([expected, rows[:, -1].real])
+    assert _relative_error(forward_rows(image), expected) < 1e-6
 
 
 def test_angular_peak_statistics_equal_numpy_formulas() -> None:
     rng = np.random.default_rng(13)
     curve = np.roll(np.exp(-0.5 * (np.arange(360) - 180.0) ** 2 / 1.5**2), 97)
     curve = curve + rng.normal(0, 0.01, 360)
-    peak = locate_peak_1d(curve, 1.0)
+    step = np.pi / 360
+    estimate = _rotation_of_peak(curve, 1.0, step)
     i0 = int(np.argmax(curve))
     exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * 1.0)) + 1
     keep = np.ones(360, dtype=bool)
     keep[(i0 + np.arange(-exclude, exclude + 1)) % 360] = False
-    assert peak.quality == pytest.approx(curve[i0] / np.std(curve[keep]), rel=1e-9)
+    quality = curve[i0] / np.std(curve[keep])
+    assert estimate.quality == pytest.approx(quality, rel=1e-9)
     logt = np.log(curve[(i0 + np.arange(-1, 2)) % 360])
     second = logt[0] - 2.0 * logt[1] + logt[2]
-    assert peak.curvature == pytest.approx(-second, rel=1e-12)
-    expected = i0 + 0.5 * (logt[0] - logt[2]) / second
-    assert peak.shift == pytest.approx((expected + 180.0) % 360 - 180.0, abs=1e-9)
-    assert abs(peak.shift - (277 - 360)) < 0.1  # the true peak, wrapped to [-180, 180)
+    shift = (i0 + 0.5 * (logt[0] - logt[2]) / second + 180.0) % 360 - 180.0
+    assert estimate.angle_rad == pytest.approx(-shift * step, abs=1e-12)
+    assert estimate.sigma_rad == pytest.approx(np.sqrt(-1.0 / second) / quality * step, rel=1e-9)
+    assert abs(shift - (277 - 360)) < 0.1  # the true peak, wrapped to [-180, 180)
 
 
 def test_peak_covariance_closed_form_equals_linalg() -> None:

@@ -178,9 +178,10 @@ def test_preprocess_resamples_nonuniform_azimuths_and_times() -> None:
         (np.zeros((N_AZ, N_BINS), np.uint8), clockwise_azimuths(N_AZ - 1)),
         (np.zeros((4, N_BINS), np.uint8), clockwise_azimuths(4)),
         (np.zeros(N_BINS, np.uint8), clockwise_azimuths()),
+        (np.zeros((N_AZ, N_BINS), np.float32), clockwise_azimuths()),
     ],
 )
-def test_preprocess_rejects_bad_geometry(polar: np.ndarray, azimuths: np.ndarray) -> None:
+def test_preprocess_rejects_bad_geometry_or_dtype(polar: np.ndarray, azimuths: np.ndarray) -> None:
     with pytest.raises(OdometryError):
         preprocess_polar(FakeScan(0, polar, azimuths, RES_M), PreprocessConfig())
 

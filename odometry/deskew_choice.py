@@ -38,6 +38,10 @@ from odometry.velocity import (
 from raplace.se2 import between, compose
 
 FloatArray = NDArray[np.float64]
+YAW_TREND_GAIN = 1.0
+"""Fraction of the yaw-rate trend extrapolated to a time (bounded by the last measured change,
+never across zero; `Velocity.at`): where a turn tightens, a scan de-skewed with the trend
+correlates more strongly, and the images pick (`with_trend`)."""
 Rendered = tuple[PreparedScan, MotionEstimate]
 """A rendering of a scan and its registration against the reference."""
 
@@ -47,7 +51,7 @@ def expected_twist(
 ) -> FloatArray:
     """(3,) the running twist expected at `time_ns` [ns] (with the bounded yaw-rate trend, or
     constant without `trend`), within the plausible speed and yaw rate."""
-    gain = cfg.deskew.yaw_rate_extrapolation if trend else 0.0
+    gain = YAW_TREND_GAIN if trend else 0.0
     return bounded_twist(velocity.at(time_ns, gain), cfg)
 
 
@@ -137,8 +141,7 @@ def weak_searched(
 def refreshed(scan: PreparedScan, velocity: Velocity | None, cfg: OdometryConfig) -> PreparedScan:
     """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans);
     `scan` itself where nothing would change."""
-    dcfg = cfg.deskew
-    if velocity is None or not dcfg.enabled or scan.polar.timing is None:
+    if velocity is None or not cfg.deskew or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
     if scan.twist is not None and close_twists(new, scan.twist):

@@ -1,4 +1,4 @@
-"""The odometry's per-scan results (`OdometryResult`) and their history."""
+"""The odometry's output for one scan (`OdometryResult`)."""
 
 from __future__ import annotations
 
@@ -49,26 +49,3 @@ class OdometryResult:
     quality: float
     reason: str = ""
     registrations: int = 0
-
-
-class ResultHistory:
-    """Every scan's result, in order."""
-
-    def __init__(self) -> None:
-        self._results: list[OdometryResult] = []
-
-    def __len__(self) -> int:
-        return len(self._results)
-
-    @property
-    def results(self) -> list[OdometryResult]:
-        """One result per scan, in order."""
-        return list(self._results)
-
-    def __getitem__(self, index: int) -> OdometryResult:
-        """Scan `index`'s result."""
-        return self._results[index]
-
-    def append(self, result: OdometryResult) -> None:
-        """Add the next scan's result."""
-        self._results.append(result)

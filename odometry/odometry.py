@@ -70,6 +70,10 @@ GAP_SIGMA_XY_M = 1.0
 (a few m/s^2 of braking or acceleration over a 4 Hz interval, with margin)."""
 GAP_SIGMA_YAW_DEG = 5.0
 """The same for its rotation [deg] (a steering change over the interval)."""
+KEYFRAME_QUALITY_FACTOR = 2.0
+"""A registration whose peak quality falls below this multiple of the failure threshold
+(`quality.min_peak_quality`) makes the scan the keyframe: the overlap with the keyframe is
+fading, and the next scans should not fail against it."""
 FALLBACK_KEYFRAMES = 2
 """Earlier keyframes tried, most recent first, before the previous scan when the keyframe and
 the last registered scan cannot be registered (a gap's pose is only a prediction;
@@ -95,7 +99,7 @@ class Odometry:
     @property
     def results(self) -> list[OdometryResult]:
         """One result per registered scan, in order (as `register` returned them)."""
-        return self._state.history.results
+        return list(self._state.history)
 
     def result(self, index: int) -> OdometryResult:
         """Scan `index`'s result as in `results`, without copying the list."""
@@ -192,7 +196,7 @@ class Odometry:
         state, cfg = self._state, self.config
         polar = preprocess_polar(frame, cfg.preprocess)
         twist = None
-        if state.velocity is not None and cfg.deskew.enabled:
+        if state.velocity is not None and cfg.deskew:
             twist = self._velocity_at(
                 polar.timestamp_ns + seconds_to_ns(polar.mid_sweep_s or 0.0), trend=False
             )
@@ -319,7 +323,7 @@ class Odometry:
                 self._register_images,
             )
             if state.velocity is not None:
-                last_quality = state.history[len(state.history) - 1].quality
+                last_quality = state.history[-1].quality
                 scan, estimate = deskew_choice.weak_searched(
                     reference, (scan, estimate), last_quality, self.config, self._register_images
                 )
@@ -335,7 +339,7 @@ class Odometry:
             image_pose=image_pose,
             scan=scan,
             conversion_covariance=conversion_covariance(
-                estimate.covariance, change, scan.image_time_s, interval_s, self.config.quality
+                estimate.covariance, change, scan.image_time_s, interval_s
             ),
         )
         covariance = self._factor_covariance(previous, reference, node, estimate, change)
@@ -372,7 +376,7 @@ class Odometry:
     ) -> FloatArray:
         """The covariance of `node`'s result (in `previous`'s axes)."""
         registration_covariance = estimate.covariance + unseen_covariance(
-            estimate.motion, change, node.scan, self.config.quality
+            estimate.motion, change, node.scan
         )
         return factor_covariance(
             registration_covariance,
@@ -442,7 +446,7 @@ class Odometry:
         return bool(
             np.hypot(estimate.dx, estimate.dy) >= kcfg.max_translation_m
             or abs(estimate.dyaw) >= np.deg2rad(kcfg.max_rotation_deg)
-            or estimate.quality < kcfg.min_peak_quality
+            or estimate.quality < KEYFRAME_QUALITY_FACTOR * self.config.quality.min_peak_quality
             or keyframe.frames + 1 >= kcfg.max_frames
         )
 

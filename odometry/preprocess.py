@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry import OdometryError
-from odometry.config import LevelConfig, PreprocessConfig
+from odometry.config import PreprocessConfig
 from odometry.deskew import sampling_maps
 from odometry.scan import Scan
 from raplace.units import NS_PER_S
@@ -113,22 +113,33 @@ class CartesianLevel:
         return self.grid.cell_m
 
 
+TAPER_FRACTION = 0.3
+"""The radial apodisation window falls from 1 to 0 over this outer fraction of an image's
+inscribed radius: wide enough to keep the image border out of the spectrum, narrow enough to
+keep most of the scene."""
+
+
 @functools.lru_cache(maxsize=8)
-def cartesian_level(cfg: LevelConfig) -> CartesianLevel:
-    """The geometry and apodisation window of a level (cached per config).
+def cartesian_level(
+    cell_m: float, size_px: int, taper_fraction: float = TAPER_FRACTION
+) -> CartesianLevel:
+    """The geometry and apodisation window of a level of `size_px` (even) pixels of `cell_m`
+    [m] a side (cached).
 
     The window is a radial Tukey window: 1 up to (1 - taper_fraction) of the inscribed radius,
     then a cosine fall to 0 at the inscribed radius, 0 in the corners.
     """
-    if cfg.size_px < 8 or cfg.size_px % 2 or cfg.cell_m <= 0:
-        raise OdometryError(f"level needs an even size_px >= 8 and cell_m > 0, got {cfg}")
-    if not 0.0 < cfg.taper_fraction <= 1.0:
-        raise OdometryError(f"taper_fraction must be in (0, 1], got {cfg.taper_fraction}")
-    grid = CartesianGrid(cell_m=cfg.cell_m, size_px=cfg.size_px)
+    if size_px < 8 or size_px % 2 or cell_m <= 0:
+        raise OdometryError(
+            f"a level needs an even size_px >= 8 and cell_m > 0, got {size_px}, {cell_m}"
+        )
+    if not 0.0 < taper_fraction <= 1.0:
+        raise OdometryError(f"taper_fraction must be in (0, 1], got {taper_fraction}")
+    grid = CartesianGrid(cell_m=cell_m, size_px=size_px)
     x, y = grid.pixel_centres()
     rng = np.hypot(x, y)
     outer = grid.half_extent_m
-    inner = (1.0 - cfg.taper_fraction) * outer
+    inner = (1.0 - taper_fraction) * outer
     fall = np.clip((rng - inner) / (outer - inner), 0.0, 1.0)
     window = 0.5 * (1.0 + np.cos(np.pi * fall))
     return CartesianLevel(

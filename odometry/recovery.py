@@ -33,17 +33,23 @@ from odometry.registration import MotionEstimate, kinematic_reason
 from raplace.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
+
+PREDICTION_TOLERANCE_M = 1.5
+"""A registration further than this [m] from the constant-velocity prediction is checked against
+one seeded with the prediction (the stronger correlation wins): a few m/s^2 of braking over a
+4 Hz interval stays inside it."""
+PREDICTION_TOLERANCE_DEG = 5.0
+"""The same for the rotation [deg]: a steering change over a 4 Hz interval."""
 Node = TypeVar("Node")
 
 
 def agrees(motion: FloatArray, expected: FloatArray, cfg: OdometryConfig) -> bool:
-    """`motion` (3,) is within the prediction tolerances (`QualityConfig.max_prediction_error_m`,
-    `max_prediction_error_deg`) of `expected` (3,); poses or motions in one frame."""
-    qcfg = cfg.quality
+    """`motion` (3,) is within the prediction tolerances (`PREDICTION_TOLERANCE_M`,
+    `PREDICTION_TOLERANCE_DEG`) of `expected` (3,); poses or motions in one frame."""
     off = np.asarray(motion, dtype=np.float64) - np.asarray(expected, dtype=np.float64)
     return bool(
-        np.hypot(off[0], off[1]) <= qcfg.max_prediction_error_m
-        and abs(wrap_angle(float(off[2]))) <= np.deg2rad(qcfg.max_prediction_error_deg)
+        np.hypot(off[0], off[1]) <= PREDICTION_TOLERANCE_M
+        and abs(wrap_angle(float(off[2]))) <= np.deg2rad(PREDICTION_TOLERANCE_DEG)
     )
 
 

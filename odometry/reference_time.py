@@ -2,11 +2,8 @@
 
 Registrations chain image poses (`registration.PreparedScan`); the pose a user sees is at the
 scan's reference time, the image pose moved by the body velocity over the time between them.
-Once the scan after it has registered, the velocities measured on both sides of that move are
-known (previous image pose -> this one, this one -> next), each the mean over its interval;
-interpolating them linearly in time to the middle of the move is the yaw of a quadratic through
-the three image poses, which follows a yaw-rate reversal that the velocity measured up to the
-scan (with or without its trend) cannot.
+`interpolated_twist` gives the twist between two measured velocities (the loop verifier's sweep
+velocity of a scan between two odometry steps).
 """
 
 from __future__ import annotations

@@ -76,6 +76,18 @@ peak's error is under a coarse pixel, about three fine ones)."""
 MAX_COARSE_FINE_DISAGREEMENT_M = 1.0
 """Coarse and fine translations further apart than this [m] fail a registration (more than a
 coarse pixel: the fine peak is another structure)."""
+COARSE_SIZE_PX = 256
+"""Side of the coarse image [pixels]: at the default 0.8 m it spans +-102 m, the useful range of
+a Navtech sensor, so the global search sees every structure both scans share."""
+FINE_SIZE_PX = 384
+"""Side of the fine image [pixels]: at the default 0.25 m it spans +-48 m, the near range where
+returns are dense and sharp enough for a sub-pixel translation."""
+MIN_SIGMA_XY_M = 0.01
+"""Floor of a registration's translation standard deviation [m] (a sharp peak is not a
+centimetre-exact motion: the scan's range resolution and de-skew remain)."""
+MIN_SIGMA_YAW_DEG = 0.05
+"""Floor of its rotation standard deviation [deg]; it leaves room for the small rotation bias of
+straight steps."""
 HINT_RADIUS_M = 4.0
 """A registration seeded with a hint searches the coarse translation peak within this distance of
 the hint's translation [m]: the error of a constant-velocity prediction at 1 Hz (a few m/s^2 of
@@ -122,8 +134,8 @@ class PreparedScan:
     """A conditioned scan with the spectra registration needs, computed once.
 
     The images show the scene from the sensor pose at the scan's *image time*: mid-sweep when
-    the scan is de-skewed and `cfg.deskew.mid_sweep` is set (an error in the velocity then only
-    smears the image symmetrically instead of displacing it), the reference time otherwise.
+    the scan is de-skewed (an error in the velocity then only smears the image symmetrically
+    instead of displacing it), the reference time otherwise.
     `image_pose` is that pose in the scan's reference frame, under the de-skew velocity.
 
     Attributes:
@@ -149,7 +161,7 @@ class PreparedScan:
         self.twist = None if twist is None or polar.timing is None else np.asarray(twist, float)
         self.cfg = cfg
         mid = polar.mid_sweep_s
-        use_mid = cfg.deskew.enabled and cfg.deskew.mid_sweep and mid is not None
+        use_mid = cfg.deskew and mid is not None
         # Without a velocity the image is the scan as measured, whose mean viewpoint is the
         # mid-sweep pose too (its offset from the reference pose is unknown: zeros).
         self.image_time_s = float(mid) if use_mid and mid is not None else 0.0
@@ -182,7 +194,7 @@ class PreparedScan:
     @functools.cached_property
     def coarse_spectrum(self) -> PackedSpectrum:
         """Packed spectrum of the unrotated coarse image."""
-        return forward(self._render(cartesian_level(self.cfg.coarse), 0.0))
+        return forward(self._render(coarse_level(self.cfg), 0.0))
 
     @functools.cached_property
     def rotation_signature(self) -> Signature:
@@ -192,7 +204,7 @@ class PreparedScan:
     @functools.cached_property
     def fine_spectrum(self) -> PackedSpectrum:
         """Packed spectrum of the unrotated fine image (made when the scan is a reference)."""
-        return forward(self._render(cartesian_level(self.cfg.fine), 0.0))
+        return forward(self._render(fine_level(self.cfg), 0.0))
 
     @functools.cached_property
     def refine_image(self) -> NDArray[np.float32]:
@@ -216,7 +228,17 @@ def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) ->
             de-skewing is disabled or the scan has no azimuth times.
     """
     polar = preprocess_polar(scan, cfg.preprocess)
-    return PreparedScan(polar, twist if cfg.deskew.enabled else None, cfg)
+    return PreparedScan(polar, twist if cfg.deskew else None, cfg)
+
+
+def coarse_level(cfg: OdometryConfig) -> CartesianLevel:
+    """The coarse image level of `cfg`."""
+    return cartesian_level(cfg.coarse.cell_m, COARSE_SIZE_PX)
+
+
+def fine_level(cfg: OdometryConfig) -> CartesianLevel:
+    """The fine image level of `cfg`."""
+    return cartesian_level(cfg.fine.cell_m, FINE_SIZE_PX)
 
 
 def _peak_to_metres(peak: Peak, cell_m: float) -> FloatArray:
@@ -280,14 +302,14 @@ def register_images(
     translation; the refinements that follow are the same. The caller compares the two by their
     peak quality (a hint narrows the search, it never overrules the images).
     """
-    coarse_level = cartesian_level(cfg.coarse)
+    coarse = coarse_level(cfg)
     if hint is None:
         rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, ROTATION)
         coarse_peak, yaw = _coarse_translation(ref, cur, rotation.angle_rad, cfg, None)
     else:
         rotation = RotationEstimate(angle_rad=float(hint[2]), sigma_rad=0.0, quality=np.inf)
         coarse_peak, yaw = _coarse_translation(ref, cur, float(hint[2]), cfg, hint[:2])
-    t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
+    t_coarse = _peak_to_metres(coarse_peak, coarse.cell_m)
     coarse_motion = np.array([t_coarse[0], t_coarse[1], yaw])
     if ROTATION.refine:
         for refinement in range(ROTATION.refine_passes):
@@ -296,11 +318,11 @@ def register_images(
                     break  # converged: the translation was made at (about) this yaw
                 # The translation again at the refined yaw (near the last one), then the rotation.
                 coarse_peak, yaw = _coarse_translation(ref, cur, yaw, cfg, t_coarse)
-                t_coarse = _peak_to_metres(coarse_peak, coarse_level.cell_m)
+                t_coarse = _peak_to_metres(coarse_peak, coarse.cell_m)
             rotation = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
             yaw = float(wrap_angle(yaw + rotation.angle_rad))
 
-    peak, cell = coarse_peak, coarse_level.cell_m
+    peak, cell = coarse_peak, coarse.cell_m
     peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
     translation = _peak_to_metres(peak, cell)
     motion = np.array([translation[0], translation[1], yaw])
@@ -332,7 +354,7 @@ def _coarse_translation(
     Without `hint_xy` both half-turn hypotheses are correlated and the stronger peak wins (the
     Fourier-Mellin rotation is known modulo pi); with `hint_xy` (2,) [m] only `angle_rad` is
     tried and the peak is searched within `hint_radius_m` of that translation."""
-    level = cartesian_level(cfg.coarse)
+    level = coarse_level(cfg)
     image = cur._render(level, angle_rad)
     spectrum = forward(image)
     shape = image.shape
@@ -355,7 +377,7 @@ def _fine_translation(
     ref: PreparedScan, cur: PreparedScan, t_coarse: FloatArray, yaw: float, cfg: OdometryConfig
 ) -> tuple[Peak, float]:
     """The fine level's translation peak near the coarse estimate, and the fine cell [m]."""
-    level = cartesian_level(cfg.fine)
+    level = fine_level(cfg)
     fine = cur._render(level, yaw)
     centre = t_coarse / level.cell_m
     surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX)
@@ -372,10 +394,8 @@ def _covariance(
     qcfg = cfg.quality
     cov = np.zeros((3, 3))
     cov[:2, :2] = peak.covariance_px() * cell_m**2 * qcfg.sigma_scale**2
-    cov[:2, :2] += np.eye(2) * qcfg.min_sigma_xy_m**2
-    cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(
-        qcfg.min_sigma_yaw_deg
-    ) ** 2
+    cov[:2, :2] += np.eye(2) * MIN_SIGMA_XY_M**2
+    cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(MIN_SIGMA_YAW_DEG) ** 2
     return cov
 
 
@@ -427,10 +447,10 @@ def estimate_motion(
     Args:
         prev, cur: the two scans (any objects with the `Scan` attributes).
         cfg: odometry settings (defaults when None).
-        twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) to de-skew both scans with
-            first; None starts from no de-skew. When both scans carry azimuth times and
-            de-skewing is enabled, the scans are then re-registered `cfg.deskew.iterations` times,
-            de-skewed with the velocity of the previous estimate.
+        twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) to de-skew both scans with.
+            None: the scans are registered as measured and, when both carry azimuth times and
+            de-skewing is on, registered once more de-skewed with the velocity that first
+            estimate gives.
 
     Returns:
         The motion estimate; check `ok` before using it.
@@ -438,21 +458,15 @@ def estimate_motion(
     cfg = OdometryConfig() if cfg is None else cfg
     ref_polar = preprocess_polar(prev, cfg.preprocess)
     cur_polar = preprocess_polar(cur, cfg.preprocess)
-    use_twist = twist if cfg.deskew.enabled else None
+    use_twist = twist if cfg.deskew else None
     estimate = register(
         PreparedScan(ref_polar, use_twist, cfg), PreparedScan(cur_polar, use_twist, cfg), cfg
     )
     dt_s = (int(cur.timestamp_ns) - int(prev.timestamp_ns)) / NS_PER_S
-    deskewable = (
-        cfg.deskew.enabled and ref_polar.timing is not None and cur_polar.timing is not None
-    )
-    if not deskewable or dt_s <= 0:
+    deskewable = cfg.deskew and ref_polar.timing is not None and cur_polar.timing is not None
+    if twist is not None or not deskewable or dt_s <= 0 or not estimate.ok:
         return estimate
-    for _ in range(cfg.deskew.iterations):
-        if not estimate.ok:
-            break
-        velocity = twist_from_motion(estimate.motion, dt_s)
-        estimate = register(
-            PreparedScan(ref_polar, velocity, cfg), PreparedScan(cur_polar, velocity, cfg), cfg
-        )
-    return estimate
+    velocity = twist_from_motion(estimate.motion, dt_s)
+    return register(
+        PreparedScan(ref_polar, velocity, cfg), PreparedScan(cur_polar, velocity, cfg), cfg
+    )

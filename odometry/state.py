@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.history import ResultHistory
+from odometry.history import OdometryResult
 from odometry.registration import PreparedScan
 from odometry.velocity import Velocity
 
@@ -38,5 +38,5 @@ class OdometryState:
     last_registered: ScanNode | None = None  # the last scan that was not a gap
     earlier_keyframes: list[ScanNode] = field(default_factory=list)  # most recent first
     velocity: Velocity | None = None
-    history: ResultHistory = field(default_factory=ResultHistory)
+    history: list[OdometryResult] = field(default_factory=list)
     registrations: int = 0  # image registrations run for the scan being registered

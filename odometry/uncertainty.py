@@ -10,11 +10,26 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.config import QualityConfig
 from odometry.registration import PreparedScan
 from raplace.se2 import between, rotate_covariance, wrap_angle
 
 FloatArray = NDArray[np.float64]
+
+VELOCITY_LAG_FRACTION = 0.25
+"""The velocity that moves a pose from mid-sweep to the scan's reference time lags an
+accelerating or turning vehicle: its error is taken as this fraction of its last change, per
+axis."""
+DESKEW_ERROR_FRACTION = 1.25
+"""A scan de-skewed with a velocity that lags the vehicle's (braking, a steering change) is bent
+by about the velocity's last change times half a sweep; this multiple of that bend is its
+translation standard deviation (above 1: the measured change itself lags the true one)."""
+DESKEW_YAW_ERROR_FRACTION = 1.25
+"""The same for the rotation bend [rad per rad]."""
+TURN_SIGMA_FRACTION = 0.1
+"""A registration's rotation error that its peak does not show grows with the turn (less
+overlap, a changed perspective): this fraction of the turn, as a standard deviation. With the
+yaw bend term it makes the odometry's yaw covariances hold the errors measured against the INS
+heading of the real RADIATE drive (`docs/decisions.md`)."""
 
 
 def conversion_covariance(
@@ -22,38 +37,37 @@ def conversion_covariance(
     velocity_change: ArrayLike,
     image_time_s: float,
     interval_s: float,
-    quality: QualityConfig,
 ) -> FloatArray:
     """(3, 3) covariance (scan axes) of moving a scan's image pose to its reference time.
 
     The offset is the velocity times `image_time_s` [s]; the velocity is a difference of two
     image poses `interval_s` [s] apart (about twice a registration's covariance
     `registration_covariance` over the interval squared) and lags a changing velocity by
-    `quality.velocity_lag_fraction` of its last change `velocity_change` (3,) [m/s, m/s, rad/s].
+    `VELOCITY_LAG_FRACTION` of its last change `velocity_change` (3,) [m/s, m/s, rad/s].
     """
     if image_time_s == 0.0 or interval_s <= 0:
         return np.zeros((3, 3))
-    lag = quality.velocity_lag_fraction * np.asarray(velocity_change, dtype=float)
+    lag = VELOCITY_LAG_FRACTION * np.asarray(velocity_change, dtype=float)
     velocity_covariance = 2.0 * registration_covariance / interval_s**2 + np.diag(lag * lag)
     return image_time_s**2 * velocity_covariance
 
 
 def unseen_covariance(
-    motion: FloatArray, velocity_change: ArrayLike, scan: PreparedScan, quality: QualityConfig
+    motion: FloatArray, velocity_change: ArrayLike, scan: PreparedScan
 ) -> FloatArray:
     """(3, 3) covariance [m^2, rad^2] of registration errors the correlation peak does not show:
-    a rotation error growing with the turn of `motion` (3,) (dx, dy [m], dyaw [rad]), and the
-    bend of a scan de-skewed with a velocity that lags the vehicle's by about `velocity_change`
-    (3,) (its last change [m/s, m/s, rad/s]) over half a sweep, its translation scaled by
-    `quality.deskew_error_fraction` and its rotation by `quality.deskew_yaw_error_fraction`.
-    The translation term is isotropic, so the axes it is expressed in do not matter."""
+    a rotation error growing with the turn of `motion` (3,) (dx, dy [m], dyaw [rad];
+    `TURN_SIGMA_FRACTION`), and the bend of a scan de-skewed with a velocity that lags the
+    vehicle's by about `velocity_change` (3,) (its last change [m/s, m/s, rad/s]) over half a
+    sweep (`DESKEW_ERROR_FRACTION`, `DESKEW_YAW_ERROR_FRACTION`). The translation term is
+    isotropic, so the axes it is expressed in do not matter."""
     timing = scan.polar.timing
     half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
     bend = half_sweep_s * np.abs(np.asarray(velocity_change, dtype=float))
-    sigma_xy_sq = quality.deskew_error_fraction**2 * float(bend[0] ** 2 + bend[1] ** 2)
-    sigma_yaw = quality.sigma_yaw_deg_per_deg * abs(wrap_angle(float(motion[2])))
-    sigma_bend_yaw = quality.deskew_yaw_error_fraction * float(bend[2])
-    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_yaw**2 + sigma_bend_yaw**2])
+    sigma_xy_sq = DESKEW_ERROR_FRACTION**2 * float(bend[0] ** 2 + bend[1] ** 2)
+    sigma_turn = TURN_SIGMA_FRACTION * abs(wrap_angle(float(motion[2])))
+    sigma_bend_yaw = DESKEW_YAW_ERROR_FRACTION * float(bend[2])
+    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_turn**2 + sigma_bend_yaw**2])
 
 
 def factor_covariance(

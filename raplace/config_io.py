@@ -32,7 +32,8 @@ def merge(
 ) -> T:
     """Return `base` with `overrides` applied, recursively for nested dataclasses.
 
-    Raises ConfigReadError for keys that `cls` does not have, values of the wrong type, or
+    Raises ConfigReadError for keys that `cls` does not have (for a key listed in the class's
+    `REMOVED_KEYS` mapping, the message says what replaced it), values of the wrong type, or
     values out of range (the ValueError of a dataclass's `__post_init__` checks, see
     `raplace.checks`); the message names the source `where` (a file path) and the key path, e.g.
     "my.yaml: odometry.keyframe: unknown key 'max_distanc'" or
@@ -47,6 +48,9 @@ def merge(
     changes: dict[str, Any] = {}
     for key, value in overrides.items():
         if key not in fields:
+            removed = getattr(cls, "REMOVED_KEYS", {}).get(key)
+            if removed:
+                raise ConfigReadError(f"{_at(where, keys)}: key {key!r} is gone: {removed}")
             known = ", ".join(sorted(fields))
             raise ConfigReadError(f"{_at(where, keys)}: unknown key {key!r} (known: {known})")
         hint = hints[key]

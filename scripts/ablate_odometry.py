@@ -93,6 +93,10 @@ def _no_deferred_first_images() -> contextlib.AbstractContextManager[None]:
     return _patched(odometry_module.Odometry, "_place_first_images", lambda *_a: None)
 
 
+def _no_trend() -> contextlib.AbstractContextManager[None]:
+    return _patched(deskew_choice, "YAW_TREND_GAIN", 0.0)
+
+
 def _one_refinement() -> contextlib.AbstractContextManager[None]:
     return _patched(registration, "ROTATION", dataclasses.replace(ROTATION, refine_passes=1))
 
@@ -107,7 +111,7 @@ def _keyframe_only() -> contextlib.AbstractContextManager[None]:
 
 VARIANTS = (
     Variant("base", "(nothing: the defaults)"),
-    Variant("no_trend", "yaw-trend hypothesis", {"deskew": {"yaw_rate_extrapolation": 0.0}}),
+    Variant("no_trend", "yaw-trend hypothesis", patch=_no_trend),
     Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
     Variant("no_deferred", "deferred first images", patch=_no_deferred_first_images),
     Variant("no_fallback", "fallback chain (keyframe only)", patch=_keyframe_only),

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from point_scenes import N_AZIMUTHS, moving_poses, point_scene, render_polar, static_poses
 from pyproj import Geod
 
-from odometry.config import LevelConfig, PreprocessConfig
+from odometry.config import PreprocessConfig
 from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.radiate import RADIATE_RANGE_RESOLUTION_M, radiate_azimuths_rad
@@ -253,7 +253,7 @@ def test_a_rotating_scan_without_azimuth_times_is_de_skewed_back_to_the_still_on
     _write_radiate(tmp_path / "seq", [still, turning], 250_000_000)
     sequence = open_sequence(tmp_path / "seq")
     preprocess = PreprocessConfig(bin_size_m=RADIATE_RANGE_RESOLUTION_M, max_range_m=100.0)
-    level = cartesian_level(LevelConfig(cell_m=0.4, size_px=400))
+    level = cartesian_level(0.4, 400)
     reference = render_cartesian(preprocess_polar(sequence[0], preprocess), level)
     skewed = preprocess_polar(sequence[1], preprocess)
     raw = render_cartesian(skewed, level)

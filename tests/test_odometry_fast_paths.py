@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from test_odometry_units import FakeScan, clockwise_azimuths
 
-from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
+from odometry.config import OdometryConfig, PreprocessConfig
 from odometry.deskew import sampling_maps
 from odometry.packed import forward_rows, inverse, pack
 from odometry.phase_correlation import (
@@ -27,7 +27,7 @@ from odometry.phase_correlation import (
     locate_peak,
 )
 from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
-from odometry.registration import PreparedScan, _residual_rotation
+from odometry.registration import PreparedScan, _residual_rotation, coarse_level
 from odometry.rotation import (
     ROTATION,
     _centred_log_magnitude,
@@ -82,7 +82,7 @@ def _maps_float64(
 @pytest.mark.parametrize("deskew", [False, True])
 def test_sampling_map_kernel_equals_float64_formulas(deskew: bool) -> None:
     rng = np.random.default_rng(11)
-    level = cartesian_level(LevelConfig(cell_m=0.5, size_px=96))
+    level = cartesian_level(0.5, 96)
     grid = polar_grid(ROTATION)
     point_sets = [
         (level.x_m, level.y_m, level.range_m, level.bearing_rad),
@@ -160,7 +160,7 @@ def test_prepared_scan_caches_equal_fresh_computations() -> None:
     polar = preprocess_polar(_blob_scan(3), cfg.preprocess)
     twist = np.array([7.0, 0.3, 0.2])
     scan = PreparedScan(polar, twist, cfg)
-    coarse = render_cartesian(polar, cartesian_level(cfg.coarse), 0.0, twist, scan.image_time_s)
+    coarse = render_cartesian(polar, coarse_level(cfg), 0.0, twist, scan.image_time_s)
     np.testing.assert_array_equal(scan.coarse_spectrum, forward(coarse))
     grid = polar_grid(ROTATION)
     np.testing.assert_array_equal(scan.refine_spectrum, angular_spectrum(scan.refine_image))

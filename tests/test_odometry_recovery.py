@@ -17,7 +17,6 @@ from numpy.typing import NDArray
 from test_odometry_sim import render
 
 from odometry import OdometryConfig, estimate_motion
-from odometry.config import QualityConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry, OdometryResult
 from odometry.recovery import plausible_twist
@@ -52,13 +51,6 @@ MAX_DRIVE_ERROR_FRACTION = 0.02
 """End-point error of the short drives below, as a fraction of the distance driven."""
 MAX_DRIFT_PCT_1HZ = 2.5
 """KITTI drift bar at --stride 4 (1 Hz)."""
-CALIBRATED = OdometryConfig(
-    quality=QualityConfig(
-        sigma_yaw_deg_per_deg=0.1, deskew_error_fraction=1.25, deskew_yaw_error_fraction=1.25
-    ),
-)
-"""The covariance terms that make the odometry's own covariances consistent (the two rotation
-terms are off by default)."""
 NEES_RANGE = (1.0, 6.0)
 """Mean normalised squared error of the scan-to-reference motions in hard driving at 4 Hz (3 when
 calibrated; 36-52 before the covariances grew with the turn and the velocity's change, see
@@ -300,7 +292,7 @@ def test_hard_driving_at_one_hertz(synthetic_root: Path, scenario: str) -> None:
     reported, _, drift = driven(synthetic_root, scenario, stride=4)
     assert reported.longest_gap_run <= MAX_GAP_RUN
     assert drift.trans_pct <= MAX_DRIFT_PCT_1HZ, drift
-    odometry, truth, _ = driven(synthetic_root, scenario, stride=4, config=CALIBRATED)
+    odometry, truth, _ = driven(synthetic_root, scenario, stride=4)
     assert odometry.longest_gap_run <= MAX_GAP_RUN
     nees = reference_nees(odometry.results, truth)
     assert NEES_RANGE_1HZ[0] <= nees.mean() <= NEES_RANGE_1HZ[1], nees.mean()
@@ -323,7 +315,7 @@ def test_covariances_in_tight_manoeuvres_at_4_hz(synthetic_root: Path, scenario:
     sequence = open_sequence(f"synthetic/{scenario}", synthetic_root)
     truth = sequence.ground_truth
     assert truth is not None
-    odometry = run([sequence[k] for k in range(len(sequence))], CALIBRATED)
+    odometry = run([sequence[k] for k in range(len(sequence))], OdometryConfig())
     nees = reference_nees(odometry.results, truth)
     assert NEES_RANGE[0] <= nees.mean() <= NEES_RANGE[1], nees.mean()
 

@@ -17,7 +17,7 @@ import pytest
 from point_scenes import point_scene, render_polar, scan_frame, static_poses
 
 from odometry import registration
-from odometry.config import DeskewConfig, OdometryConfig
+from odometry.config import OdometryConfig
 from odometry.registration import estimate_motion
 from odometry.rotation import ROTATION
 
@@ -32,7 +32,7 @@ MAX_STILL_ERROR_MDEG = 1.0
 
 def _cfg() -> OdometryConfig:
     """Without de-skew."""
-    return OdometryConfig(deskew=DeskewConfig(enabled=False))
+    return OdometryConfig(deskew=False)
 
 
 def _yaw_errors_mdeg(

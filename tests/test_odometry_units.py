@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from odometry import OdometryError
-from odometry.config import LevelConfig, OdometryConfig, PreprocessConfig
+from odometry.config import OdometryConfig, PreprocessConfig
 from odometry.deskew import motion_from_twist, sampling_maps, twist_from_motion
 from odometry.phase_correlation import correlate, forward, locate_peak
 from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
@@ -98,7 +98,7 @@ def test_rendering_matches_raplace_warper() -> None:
     )
     conditioned = preprocess_polar(scan, bare)
     np.testing.assert_array_equal(conditioned.image, polar.astype(np.float32))
-    level = cartesian_level(LevelConfig(cell_m=0.5, size_px=256, taper_fraction=1e-6))
+    level = cartesian_level(0.5, 256, 1e-6)
     ours = render_cartesian(conditioned, level) / np.maximum(level.window, 1e-12)
     theirs = CartesianWarper(CartesianGrid(0.5, 256))(polar, scan.azimuths_rad, RES_M)
     inside = level.window > 0.5
@@ -112,7 +112,7 @@ def test_rotation_rendering_turns_the_image() -> None:
     scan = FakeScan(0, polar, clockwise_azimuths(), RES_M)
     cfg = PreprocessConfig(bin_size_m=RES_M, ring_noise_removal=False, noise_floor_sigmas=-1.0)
     conditioned = preprocess_polar(scan, cfg)
-    level = cartesian_level(LevelConfig(cell_m=0.5, size_px=256))
+    level = cartesian_level(0.5, 256)
     for rotation in (0.0, 0.4):
         image = render_cartesian(conditioned, level, rotation)
         r, c = np.unravel_index(np.argmax(image), image.shape)

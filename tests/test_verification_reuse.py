@@ -111,9 +111,7 @@ def test_other_refinement_settings_reuse_only_the_conditioning(tiny: RadarSequen
     the result is that of the verifier's own settings; other conditioning: not reused."""
     base = OdometryConfig()
     cfg = LoopClosureConfig(
-        refinement=dataclasses.replace(
-            base, fine=dataclasses.replace(base.fine, taper_fraction=0.5)
-        )
+        refinement=dataclasses.replace(base, fine=dataclasses.replace(base.fine, cell_m=0.3))
     )
     query = key_scan(tiny, QUERY)
     verifier = GeometricVerifier(cfg)

@@ -240,7 +240,7 @@ class GeometricVerifier:
         if conditioning != refinement.preprocess:
             return None
         self.reused += 1
-        twist = query.twist if refinement.deskew.enabled else None
+        twist = query.twist if refinement.deskew else None
         return PreparedScan(polar, twist, refinement)
 
     def _searched_query(

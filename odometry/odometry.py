@@ -10,14 +10,14 @@
    over the whole coarse image. When that fails or disagrees with the constant-velocity
    prediction, register again seeded with the prediction; the stronger correlation wins. The
    prediction is a hint, never a veto, so a strong registration ends any run of failures.
-3. While the yaw rate changes, register the scan de-skewed with the bounded yaw-rate trend too
-   and keep the de-skew that correlates more strongly (`deskew_choice.with_trend`): past motion
-   cannot tell a turn that tightens from one that ends, the images can.
-4. Measure the velocity between the last two image poses. When it is far from the one the scan
+3. Measure the velocity between the last two image poses. When it is far from the one the scan
    was rendered with (hard braking, a curvature change), re-render the scan at the measured
-   velocity and register once more (`deskew_choice.redeskewed`). A peak far weaker than the
-   previous scan's (a de-skew far off, e.g. through a yaw-rate reversal) has its de-skew yaw
-   rate searched by peak quality (`deskew_choice.weak_searched`).
+   velocity and register once more (`deskew_choice.redeskewed`).
+4. Otherwise, while the yaw rate changes, register the scan de-skewed with the bounded yaw-rate
+   trend too and keep the de-skew that correlates more strongly (`deskew_choice.with_trend`):
+   past motion cannot tell a turn that tightens from one that ends, the images can. A peak far
+   weaker than the previous scan's (a de-skew far off, e.g. through a yaw-rate reversal) has its
+   de-skew yaw rate searched by peak quality (`deskew_choice.weak_searched`).
 5. The pose at the scan's reference time (`OdometryResult.pose`) is its image pose moved by that
    velocity; the move's error does not accumulate. The covariance is the correlation peak's
    plus the terms the peak cannot show (`uncertainty`).
@@ -185,9 +185,6 @@ class Odometry:
         reference, estimate = self._search(index, scan, predicted)
         if reference is None:
             return self._gap(index, scan, predicted, estimate)
-        scan, estimate = deskew_choice.with_trend(
-            reference, scan, estimate, state.velocity, self.config, self._register_images
-        )
         return self._accept(index, scan, reference, estimate, dt_s)
 
     # -- steps ---------------------------------------------------------------------------------
@@ -313,7 +310,7 @@ class Odometry:
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
-            scan, estimate = deskew_choice.redeskewed(
+            rendered = deskew_choice.redeskewed(
                 reference,
                 base,
                 (scan, estimate),
@@ -322,6 +319,11 @@ class Odometry:
                 self.config,
                 self._register_images,
             )
+            if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
+                rendered = deskew_choice.with_trend(
+                    reference, scan, estimate, state.velocity, self.config, self._register_images
+                )
+            scan, estimate = rendered
             if state.velocity is not None:
                 last_quality = state.history[-1].quality
                 scan, estimate = deskew_choice.weak_searched(

@@ -28,6 +28,7 @@ import argparse
 import contextlib
 import dataclasses
 import logging
+import sys
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -48,7 +49,19 @@ from radar_slam.evaluation.time_offset import ground_truth_with_offset
 from radar_slam.pipeline import load_config, run_odometry
 from radar_slam.pipeline.steps import ground_truth_of
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from benchmark_doc import update_section  # noqa: E402
+
 logger = logging.getLogger("ablate_odometry")
+SCRIPT = "scripts/ablate_odometry.py"
+ABLATION_NOTE = (
+    "Each row switches one odometry mechanism off. Real drive: ATE [m] through the GT clock "
+    "offset, end-point error and drift over 400-800 m [%]; Oxford: ATE [m]; simulated drives: "
+    "KITTI drift [%] and the longest run of gaps; every drive: registrations per scan. A "
+    "mechanism stays where switching it off makes the real drive clearly worse, or a simulated "
+    "drive worse for a physical effect real driving has (docs/decisions.md). The table before "
+    "the removals is in docs/odometry_ablation.md."
+)
 
 DEFAULT_ROOT = Path(__file__).resolve().parents[2] / "shared" / "data"
 REAL_DRIVE = "radiate/edinburgh_2019-02-12-15-33"
@@ -217,6 +230,9 @@ def main() -> None:
     parser.add_argument("--variants", help="comma-separated names (default: all)")
     parser.add_argument("--max-frames", type=int)
     parser.add_argument("--out", type=Path, help="also write the Markdown table here")
+    parser.add_argument(
+        "--write-doc", action="store_true", help="write the table into docs/benchmarks.md"
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
     logger.setLevel(logging.INFO)
@@ -253,6 +269,8 @@ def main() -> None:
     print(table)
     if args.out is not None:
         args.out.write_text(table + "\n")
+    if args.write_doc:
+        update_section("Odometry ablation", f"{ABLATION_NOTE}\n\n{table}", script=SCRIPT)
 
 
 if __name__ == "__main__":

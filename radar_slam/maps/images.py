@@ -28,8 +28,12 @@ PIXEL_MAX = 255
 """uint8 full scale of a re-made polar scan."""
 SCALE_PERCENTILE = 99.9
 """The image intensity at this percentile is the top level (brighter pixels saturate)."""
-PNG_COMPRESSION = 9
+PNG_COMPRESSION = 6
 """zlib level of the PNG encoder (deterministic for a given image)."""
+PNG_STRATEGY = cv2.IMWRITE_PNG_STRATEGY_RLE
+"""zlib strategy of the PNG encoder: run lengths only. The images are mostly zeros in runs, so
+it compresses them as well as the default strategy at level 9 (a few per cent smaller, on the
+synthetic drives) in a tenth of the time; lossless like any PNG."""
 PSEUDO_SENSOR = "map-keyframe"
 """`RadarFrame.sensor` of a scan re-made from a map image."""
 
@@ -116,7 +120,13 @@ class KeyframeImager:
         relative = np.clip(image / scale, 0.0, 1.0)
         relative[relative < geo.floor_fraction] = 0.0
         quantised = np.rint(np.sqrt(relative) * geo.levels).astype(np.uint8)
-        ok, png = cv2.imencode(".png", quantised, [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+        options = [
+            cv2.IMWRITE_PNG_COMPRESSION,
+            PNG_COMPRESSION,
+            cv2.IMWRITE_PNG_STRATEGY,
+            PNG_STRATEGY,
+        ]
+        ok, png = cv2.imencode(".png", quantised, options)
         if not ok:
             raise RadarSlamError("could not PNG-encode a keyframe image")
         return png.tobytes(), float(np.float32(scale))

@@ -109,7 +109,12 @@ def run_command(
     try:
         with progress_bar(total, f"{seq.family}/{seq.name}") as update:
             results = Pipeline(
-                seq, settings, max_frames=max_frames, progress=update, observer=observer
+                seq,
+                settings,
+                max_frames=max_frames,
+                progress=update,
+                observer=observer,
+                record_map=True,  # map/ is written from what the run keeps
             ).run()
     except BaseException:
         if observer is not None:

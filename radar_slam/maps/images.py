@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry import OdometryConfig, Scan
-from odometry.preprocess import preprocess_polar, sample_scan
+from odometry.preprocess import PolarScan, preprocess_polar, sample_scan
 from odometry.scan import RadarFrame
 from radar_slam.errors import RadarSlamError
 from raplace import checks
@@ -107,7 +107,11 @@ class KeyframeImager:
             scan: the polar scan.
             twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) for de-skewing, or None.
         """
-        polar = preprocess_polar(scan, self.odometry.preprocess)
+        return self.render(preprocess_polar(scan, self.odometry.preprocess), twist)
+
+    def render(self, polar: PolarScan, twist: NDArray[np.float64] | None) -> NDArray[np.float32]:
+        """(size_px, size_px) float32 de-skewed Cartesian image of a scan already conditioned
+        (`preprocess_polar` with this imager's odometry settings); `twist` as in `image`."""
         x, y = self._xy
         return sample_scan(polar, x, y, self._range, self._bearing, twist=twist)
 

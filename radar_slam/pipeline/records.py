@@ -16,6 +16,7 @@ from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
     LoopDecision,
 )
+from radar_slam.maps.keyframes import RecordedKeyframes
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.trajectory import Trajectory
 
@@ -104,6 +105,9 @@ class Results:
         odometry_metrics, slam_metrics: full accuracy figures, None without ground truth.
         gt_report: the GT's source and estimated clock offset, with the metrics through that
             offset; None without ground truth.
+        map_keyframes: the map keyframes made during the run (`radar_slam.maps.keyframes`), so
+            that the map is written without reading a scan again; None unless the run was asked
+            to keep them (`Pipeline(record_map=True)`).
     """
 
     sequence: str
@@ -121,6 +125,7 @@ class Results:
     odometry_metrics: TrajectoryMetrics | None
     slam_metrics: TrajectoryMetrics | None
     gt_report: GroundTruthReport | None = None
+    map_keyframes: RecordedKeyframes | None = None
 
     @property
     def accepted_loops(self) -> list[LoopDecision]:

@@ -33,6 +33,8 @@ class Progress:
         loops_accepted: loops accepted so far.
         loops_rejected: verified proposals rejected so far.
         elapsed_s: wall time since the start [s].
+        step: what the run does after its last scan ("last loops", "optimisation",
+            "evaluation"); empty while it processes scans.
     """
 
     done: int
@@ -40,6 +42,7 @@ class Progress:
     loops_accepted: int
     loops_rejected: int
     elapsed_s: float
+    step: str = ""
 
 
 ProgressCallback = Callable[[Progress], None]

@@ -167,14 +167,17 @@ class Pipeline:
             if held is not None:
                 self._extend_graph(self.odometry.result(self.frames - 1))
                 self._submit(*held, self.frames - 1)
+            self._report(self.frames, "last loops")
             self._close_loops(self.loops.finish(), None)
             with self.timer("map keyframes"):
                 self._map_keyframes = self.keyframes.finish()
         finally:
             reader.close()
             self.loops.close()
+        self._report(self.frames, "optimisation")
         self._optimise()
         self._review_loops()
+        self._report(self.frames, "evaluation")
         results = self._evaluate(time.perf_counter() - self._start)
         if self.observer is not None:
             self.observer.on_finish(results)
@@ -240,12 +243,13 @@ class Pipeline:
                 self._loops_pending = self._loops_correct = False
                 self._last_update = index
 
-    def _report(self, done: int) -> None:
+    def _report(self, done: int, step: str = "") -> None:
+        """Report `done` scans to the progress callback (`step`: what follows the last scan)."""
         if self.progress is None:
             return
         accepted, rejected = self.loops.tally()
         elapsed = time.perf_counter() - self._start
-        self.progress(Progress(done, self.frames, accepted, rejected, elapsed))
+        self.progress(Progress(done, self.frames, accepted, rejected, elapsed, step))
 
     # -- final steps --------------------------------------------------------------------------
     def _optimise(self) -> None:

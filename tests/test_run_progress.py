@@ -37,8 +37,10 @@ def test_the_bar_names_the_step_that_runs() -> None:
         progress = RunProgress(bar, loops=True)
         progress(Progress(3, 3, 2, 1, 0.5))
         progress.step("map")
-    text = shown.getvalue()
+        text = shown.getvalue()
+        progress.done()
     assert "loops=2" in text and "rejected=1" in text and "step=map" in text
+    assert "step=" not in shown.getvalue()[len(text) :]  # the final line names no step
 
 
 def test_radar_slam_run_shows_every_final_step(

@@ -58,6 +58,11 @@ class RunProgress:
         self._postfix["step"] = name
         self.bar.set_postfix(self._postfix, refresh=True)
 
+    def done(self) -> None:
+        """Every step has finished: the bar names none any more."""
+        if self._postfix.pop("step", None) is not None:
+            self.bar.set_postfix(self._postfix, refresh=False)
+
 
 @contextmanager
 def progress_bar(total: int, description: str, loops: bool = True) -> Iterator[RunProgress]:
@@ -67,8 +72,10 @@ def progress_bar(total: int, description: str, loops: bool = True) -> Iterator[R
     that the error is the one line left.
     """
     with tqdm(total=total, desc=description, unit="frame", dynamic_ncols=True, disable=None) as bar:
+        progress = RunProgress(bar, loops)
         try:
-            yield RunProgress(bar, loops)
+            yield progress
         except BaseException:
             bar.leave = False
             raise
+        progress.done()

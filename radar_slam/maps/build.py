@@ -179,7 +179,7 @@ def keyframe_content(
     cfg = results.config
     spacing_m = cfg.maps.keyframe_spacing_m
     recorded = results.map_keyframes
-    if recorded is not None and recorded.made_with(spacing_m, image, descriptor):
+    if recorded is not None and recorded.made_with(spacing_m, image, descriptor, cfg.odometry):
         scans = np.asarray([r.scan for r in recorded.records], dtype=np.int64)
         return (scans, *stacked(recorded.records, (descriptor.n_theta, descriptor.n_freq)))
     if sequence is None:

@@ -91,18 +91,25 @@ class RecordedKeyframes:
         spacing_m: the keyframe spacing along the odometry path [m].
         image: the image geometry.
         descriptor: the RaPlace descriptor settings.
+        odometry: the odometry settings (the images' conditioning and de-skew limits).
     """
 
     records: tuple[KeyframeRecord, ...]
     spacing_m: float
     image: ImageGeometry
     descriptor: DescriptorConfig
+    odometry: OdometryConfig
 
     def made_with(
-        self, spacing_m: float, image: ImageGeometry, descriptor: DescriptorConfig
+        self,
+        spacing_m: float,
+        image: ImageGeometry,
+        descriptor: DescriptorConfig,
+        odometry: OdometryConfig,
     ) -> bool:
         """Whether these keyframes are what those settings make."""
-        return (self.spacing_m, self.image, self.descriptor) == (spacing_m, image, descriptor)
+        made = (self.spacing_m, self.image, self.descriptor, self.odometry)
+        return made == (spacing_m, image, descriptor, odometry)
 
 
 def describe_keyframe(
@@ -211,6 +218,7 @@ class KeyframeRecorder:
             self.maps.keyframe_spacing_m,
             self.maps.image,
             self.descriptor_config,
+            self.odometry,
         )
 
     def _make(self, held: _Held, after: Velocity | None) -> None:

@@ -298,6 +298,8 @@ class Recorder:
         self._last_cpu = time.process_time()
 
     def __call__(self, progress: Progress) -> None:
+        if progress.step:  # after the last scan: no new window
+            return
         if progress.done % self.every and progress.done != progress.total:
             return
         now, now_cpu = time.perf_counter(), time.process_time()

@@ -21,8 +21,14 @@ usual. The report compares the SLAM ATE with and without the injection.
 `--write-doc` writes one table line per sequence and stride (the first of `--workers`) into
 docs/benchmarks.md.
 
+`--whole-command` times `radar-slam run` instead, as a user runs it (`whole_command.py`): one
+subprocess per sequence, stride and `--workers` (1: pinned to one core with `taskset -c`, 2: on
+two cores), default configuration, from its start to its exit (map/ written). It reports the
+whole command's scans/s beside the run's own figure (the line the command prints), the time of
+the last file written, the subprocess's CPU time and the machine's load average.
+
 Usage: python scripts/bench_pipeline.py [SEQ ...] [--workers 1 2] [--max-frames N]
-       [--stride K ...] [--inject-false F] [--json OUT] [--write-doc]
+       [--stride K ...] [--inject-false F] [--json OUT] [--write-doc] [--whole-command]
 """
 
 from __future__ import annotations
@@ -49,6 +55,8 @@ from raplace.retrieval import PlaceRecognizer
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_raplace import pin_to_one_core  # noqa: E402
+from whole_command import WholeCommand, time_run  # noqa: E402
+from whole_command import table as whole_command_table  # noqa: E402
 
 logger = logging.getLogger("bench_pipeline")
 
@@ -185,6 +193,42 @@ def doc_line(spec: str, stride: int, workers: int, results: Results) -> str:
     )
 
 
+def whole_command_rows(args: argparse.Namespace, cores: set[int]) -> list[WholeCommand]:
+    """`radar-slam run` timed as a subprocess per sequence, stride and worker count."""
+    shared: list[str] = []
+    if args.data_root is not None:
+        shared += ["--data-root", str(args.data_root.resolve())]
+    if args.config is not None:
+        shared += ["--config", str(args.config.resolve())]
+    if args.max_frames is not None:
+        shared += ["--max-frames", str(args.max_frames)]
+    rows = []
+    for spec, stride in [(s, k) for s in args.sequences for k in args.stride or [1]]:
+        name = spec if stride == 1 else f"{spec} --stride {stride}"
+        target = str(Path(spec).resolve()) if Path(spec).exists() else spec  # a folder or bag
+        for workers in args.workers:
+            row = time_run(
+                target, sorted(cores)[:workers], [*shared, "--stride", str(stride)], label=name
+            )
+            logger.info(
+                "%s on %d core(s): %d scans, whole command %.1f s = %.1f scans/s (last file at "
+                "%.1f s, CPU %.1f s), in run %.1f scans/s; SLAM ATE %s m; load %.1f -> %.1f",
+                name,
+                workers,
+                row.scans,
+                row.wall_s,
+                row.scans_per_s,
+                row.last_file_s,
+                row.cpu_s,
+                row.run_scans_per_s,
+                _f(row.ate_slam_m),
+                row.load_before,
+                row.load_after,
+            )
+            rows.append(row)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequences", nargs="*", default=list(DEFAULT_SEQUENCES))
@@ -207,10 +251,21 @@ def main() -> None:
         "--stride", type=int, action="append", default=[], help="every K-th scan; repeatable"
     )
     parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
+    parser.add_argument(
+        "--whole-command",
+        action="store_true",
+        help="time `radar-slam run` as a subprocess (whole command beside in-run scans/s)",
+    )
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     logging.getLogger("odometry").setLevel(logging.ERROR)
     cores = os.sched_getaffinity(0)
+    if args.whole_command:
+        timed = whole_command_rows(args, cores)
+        logger.info("%s", whole_command_table(timed))
+        if args.json is not None:
+            args.json.write_text(json.dumps([r.to_dict() for r in timed], indent=2) + "\n")
+        return
     pin_to_one_core()  # re-executes with single-threaded BLAS the first time
     cv2.setNumThreads(1)
     if len(cores) < max(args.workers):

@@ -23,8 +23,10 @@ from radar_slam.commands.options import (
     DATA_ROOT_OPTION,
     MAX_FRAMES_OPTION,
     OUT_OPTION,
+    RunProgress,
     progress_bar,
 )
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.stride import strided
 from radar_slam.maps.build import build_map  # every run writes map/
 from radar_slam.maps.format import Map, write_map
@@ -39,6 +41,7 @@ from radar_slam.outputs import (
 from radar_slam.pipeline import (
     Pipeline,
     PipelineConfig,
+    Results,
     frame_count,
     open_configured,
     run_odometry,
@@ -106,32 +109,55 @@ def run_command(
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
     observer = None if viewer is None else RerunViewer(viewer, f"{seq.family}/{seq.name}")
-    try:
-        with progress_bar(total, f"{seq.family}/{seq.name}") as update:
+    with progress_bar(total, f"{seq.family}/{seq.name}") as bar:  # until map/ is written
+        try:
             results = Pipeline(
-                seq, settings, max_frames=max_frames, progress=update, observer=observer
+                seq,
+                settings,
+                max_frames=max_frames,
+                progress=bar,
+                observer=observer,
+                record_map=True,  # map/ is written from what the run keeps
             ).run()
-    except BaseException:
-        if observer is not None:
-            observer.abandon()
-        raise
+        except BaseException:
+            if observer is not None:
+                observer.abandon()
+            raise
+        folder, results, joined_text = write_run(seq, results, prior_map, out, bar)
+    typer.echo(slam_summary(results), nl=False)
+    typer.echo(joined_text, nl=False)  # run --map
+    typer.echo(f"results in {folder}")
+    if viewer is not None and viewer != SPAWN:
+        typer.echo(f"viewer recording in {viewer}")
+
+
+def write_run(
+    seq: RadarSequence,
+    results: Results,
+    prior_map: Map | None,
+    out: Path | None,
+    bar: RunProgress,
+) -> tuple[Path, Results, str]:
+    """Write the result folder of a finished run, map/ included (with `prior_map`: the session
+    joined to it first); returns the folder, the results written (in the map's frame when
+    joined) and the text about the join ("" without)."""
+    if prior_map is not None:
+        bar.step("joining the map")
     joined = None if prior_map is None else join_session(results, seq, prior_map)
-    results = results if joined is None else joined.results  # in the map's frame
+    written = results if joined is None else joined.results  # in the map's frame
     joined_text: list[str] = []
 
     def write(folder: Path) -> None:
-        write_results(folder, results)
-        the_map = build_map(results, seq) if joined is None else joined.map
+        bar.step("results")
+        write_results(folder, written)
+        bar.step("map")
+        the_map = build_map(written, seq) if joined is None else joined.map
         write_map(folder / MAP_FOLDER, the_map)
         if joined is not None:
             joined_text.append(write_joined(folder, joined))
 
     folder = write_result_dir(seq.family, seq.name, write, out)
-    typer.echo(slam_summary(results), nl=False)
-    typer.echo("".join(joined_text), nl=False)  # run --map
-    typer.echo(f"results in {folder}")
-    if viewer is not None and viewer != SPAWN:
-        typer.echo(f"viewer recording in {viewer}")
+    return folder, written, "".join(joined_text)
 
 
 def odometry_command(

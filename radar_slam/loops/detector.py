@@ -62,6 +62,8 @@ log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 POSE_DIM = 3
+DescriptorListener = Callable[[int, NDArray[np.float32]], None]
+"""Takes a scan's key and its RaPlace descriptor (`LoopDetector`'s `on_describe`)."""
 
 
 class LoopDetectorProtocol(Protocol):
@@ -150,6 +152,9 @@ class LoopDetector:
             detector keeps every database scan in memory (about 1.3 MB per MulRan scan).
         recognizer: the place database (default: RaPlace `PlaceRecognizer`).
         verifier: the geometric verifier (default: `GeometricVerifier`).
+        on_describe: called with (key, descriptor) each time a scan is described (in the
+            thread that calls `add` or `finish`), so that another stage need not describe it
+            again; the descriptor must not be changed.
 
     Poses are the caller's odometry T_world_scan (3,) of each scan: with them, database entries
     are spaced by travelled distance, scans are de-skewed with the velocity they imply, and
@@ -164,10 +169,12 @@ class LoopDetector:
         *,
         recognizer: Recognizer | None = None,
         verifier: Verifier | None = None,
+        on_describe: DescriptorListener | None = None,
     ) -> None:
         self.config = LoopClosureConfig() if config is None else config
         cfg = self.config
         self.scan_loader = scan_loader
+        self.on_describe = on_describe
         self.describe = DescriptorExtractor(cfg.raplace.descriptor)
         self.recognizer: Recognizer = (
             PlaceRecognizer(held_back_retrieval(cfg.raplace.retrieval, cfg.recent_path_m))
@@ -380,6 +387,8 @@ class LoopDetector:
         scan, pose, key = held.scan, held.pose, held.key
         time_s = int(scan.timestamp_ns) / NS_PER_S
         descriptor = self.describe(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
+        if self.on_describe is not None:
+            self.on_describe(key, descriptor)
         path_m = held.path_m if pose is not None else None
         if self._held_back is not None:
             self._held_back.release(time_s, path_m)
@@ -542,9 +551,11 @@ class NullLoopDetector:
 
 
 def make_loop_detector(
-    config: LoopClosureConfig, scan_loader: Callable[[int], Scan] | None = None
+    config: LoopClosureConfig,
+    scan_loader: Callable[[int], Scan] | None = None,
+    on_describe: DescriptorListener | None = None,
 ) -> LoopDetector | NullLoopDetector:
     """The configured detector: `LoopDetector`, or `NullLoopDetector` when disabled."""
     if not config.enabled:
         return NullLoopDetector(config)
-    return LoopDetector(config, scan_loader)
+    return LoopDetector(config, scan_loader, on_describe=on_describe)

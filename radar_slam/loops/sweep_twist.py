@@ -89,16 +89,25 @@ def sweep_twist(
     return interpolated_twist(before, after, mean_time_ns)
 
 
+def step_velocity(
+    previous: OdometryResult, current: OdometryResult, limits: OdometryConfig
+) -> Velocity | None:
+    """The velocity of the odometry step from `previous` into `current` (`step_twist`; None for
+    a step of no duration or one beyond the vehicle's limits)."""
+    start_ns, end_ns = int(previous.timestamp_ns), int(current.timestamp_ns)
+    if end_ns <= start_ns:
+        return None
+    return step_twist(current.motion, start_ns, end_ns, limits).velocity
+
+
 def step_velocities(
     results: Sequence[OdometryResult], limits: OdometryConfig
 ) -> list[Velocity | None]:
-    """Entry n: the velocity of the odometry step from scan n - 1 into scan n (`step_twist`;
-    None for the first scan, a step of no duration, or one beyond the vehicle's limits)."""
+    """Entry n: the velocity of the odometry step from scan n - 1 into scan n (`step_velocity`;
+    None for the first scan)."""
     velocities: list[Velocity | None] = [None] * len(results)
     for n in range(1, len(results)):
-        start_ns, end_ns = int(results[n - 1].timestamp_ns), int(results[n].timestamp_ns)
-        if end_ns > start_ns:
-            velocities[n] = step_twist(results[n].motion, start_ns, end_ns, limits).velocity
+        velocities[n] = step_velocity(results[n - 1], results[n], limits)
     return velocities
 
 

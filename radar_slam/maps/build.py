@@ -1,17 +1,21 @@
 """Building a map from a SLAM run: keyframes, descriptors, images, the reduced pose graph.
 
-`build_map(results, sequence)` picks a keyframe every `maps.keyframe_spacing_m` of the optimised
-trajectory, reads those scans again, describes them (RaPlace descriptor, as the loop detector
-does) and stores their de-skewed Cartesian images (`radar_slam.maps.images`). The pose graph is
-the run's graph reduced to the keyframes: an odometry edge between consecutive keyframes (the
-optimised relative pose, the chained odometry covariance) and each accepted loop moved onto the
-keyframes at or before its two scans. With ground truth, the map stores the SE(2) Umeyama
-alignment of the optimised trajectory to it (T_gt_map) and each keyframe's GT pose.
+`build_map(results)` takes a keyframe every `maps.keyframe_spacing_m` of the odometry path
+(`KeyframeSpacing`, the rule the run applies as it goes) with its RaPlace descriptor (as the
+loop detector describes scans) and its de-skewed Cartesian image (`radar_slam.maps.images`). A
+run made with `Pipeline(record_map=True)` already holds them (`radar_slam.maps.keyframes`), so no
+scan is read again; for another run, `build_map(results, sequence)` reads the keyframe scans
+again and makes the same content. The pose graph is the run's graph reduced to the keyframes,
+at their optimised poses: an odometry edge between consecutive keyframes (the optimised relative
+pose, the chained odometry covariance) and each accepted loop moved onto the keyframes at or
+before its two scans. With ground truth, the map stores the SE(2) Umeyama alignment of the
+optimised trajectory to it (T_gt_map) and each keyframe's GT pose.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
@@ -21,13 +25,19 @@ from numpy.typing import NDArray
 from odometry import OdometryConfig, OdometryResult
 from odometry.velocity import Velocity
 from radar_slam.datasets.frame import RadarSequence
-from radar_slam.errors import TrajectoryError
+from radar_slam.errors import RadarSlamError, TrajectoryError
 from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
 from radar_slam.loops import LoopDecision
 from radar_slam.loops.sweep_twist import scan_sweep_twist, step_velocities
 from radar_slam.maps.config import MapsConfig
 from radar_slam.maps.format import EDGE_DTYPE, EDGE_KINDS, KEYFRAME_DTYPE, Map, Session
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
+from radar_slam.maps.keyframes import (
+    DESCRIPTOR_DTYPE,
+    KeyframeRecord,
+    KeyframeSpacing,
+    describe_keyframe,
+)
 from radar_slam.trajectory import Trajectory
 from raplace.config import DescriptorConfig
 from raplace.descriptor import DescriptorExtractor
@@ -44,18 +54,10 @@ _UPPER = np.triu_indices(3)
 
 def select_keyframes(poses: FloatArray, spacing_m: float) -> NDArray[np.int64]:
     """Indices of the poses (N, 3) that become keyframes: the first, then one each time the
-    path since the previous keyframe reaches `spacing_m` [m]."""
+    path since the previous keyframe reaches `spacing_m` [m] (`KeyframeSpacing`)."""
+    spacing = KeyframeSpacing(spacing_m)
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    if len(poses) == 0:
-        return np.zeros(0, dtype=np.int64)
-    steps = np.hypot(*np.diff(poses[:, :2], axis=0).T)
-    chosen = [0]
-    travelled = 0.0
-    for n, step in enumerate(steps, start=1):
-        travelled += float(step)
-        if travelled >= spacing_m:
-            chosen.append(n)
-            travelled = 0.0
+    chosen = [n for n, pose in enumerate(poses) if spacing.is_keyframe(pose)]
     return np.asarray(chosen, dtype=np.int64)
 
 
@@ -139,23 +141,57 @@ def describe_keyframes(
 ) -> tuple[NDArray[np.float16], list[bytes], NDArray[np.float32]]:
     """Read the keyframe scans again: (K, n_theta, n_freq) float16 descriptors, PNG images
     (de-skewed with each scan's sweep twist from the run's `step_velocities`) and their
-    intensity scales."""
+    intensity scales (`describe_keyframe`, as a recording run makes them)."""
     describe = DescriptorExtractor(descriptor)
     imager = KeyframeImager(image, odometry)
-    descriptors, images, scales = [], [], []
+    records = []
     for scan in scans:
         frame = sequence[int(scan)]
-        descriptors.append(describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m))
         twist = scan_sweep_twist(velocities, int(scan), frame)
-        png, scale = imager.encode(imager.image(frame, twist))
-        images.append(png)
-        scales.append(scale)
-    shape = (len(scans), *describe.shape)
-    return (
-        np.asarray(descriptors, dtype=np.float16).reshape(shape),
-        images,
-        np.asarray(scales, dtype=np.float32),
-    )
+        records.append(describe_keyframe(int(scan), frame, twist, imager, describe))
+    return stacked(records, describe.shape)
+
+
+def stacked(
+    records: Sequence[KeyframeRecord], shape: tuple[int, int]
+) -> tuple[NDArray[np.float16], list[bytes], NDArray[np.float32]]:
+    """(K, n_theta, n_freq) descriptors, PNG images and (K,) scales of keyframe records
+    (`shape`: one descriptor's, for none)."""
+    descriptors = np.zeros((len(records), *shape), dtype=DESCRIPTOR_DTYPE)
+    for n, record in enumerate(records):
+        descriptors[n] = record.descriptor
+    images = [r.png for r in records]
+    return descriptors, images, np.asarray([r.image_scale for r in records], dtype=np.float32)
+
+
+def keyframe_content(
+    results: Results,
+    sequence: RadarSequence | None,
+    image: ImageGeometry,
+    descriptor: DescriptorConfig,
+) -> tuple[NDArray[np.int64], NDArray[np.float16], list[bytes], NDArray[np.float32]]:
+    """(scans, descriptors, images, scales) of a run's keyframes: those it recorded when they
+    were made with these settings, else read from `sequence` again.
+
+    Raises:
+        RadarSlamError: the run recorded no such keyframes and no sequence is given.
+    """
+    cfg = results.config
+    spacing_m = cfg.maps.keyframe_spacing_m
+    recorded = results.map_keyframes
+    if recorded is not None and recorded.made_with(spacing_m, image, descriptor, cfg.odometry):
+        scans = np.asarray([r.scan for r in recorded.records], dtype=np.int64)
+        return (scans, *stacked(recorded.records, (descriptor.n_theta, descriptor.n_freq)))
+    if sequence is None:
+        raise RadarSlamError(
+            f"no map of {results.sequence}: the run kept no keyframes with these settings "
+            "(Pipeline(record_map=True)) and no sequence was given to read them from"
+        )
+    scans = select_keyframes(results.odometry.poses, spacing_m)
+    log.info("map of %s: reading %d keyframe scans again", results.sequence, len(scans))
+    velocities = step_velocities(results.odometry_results, cfg.odometry)
+    content = describe_keyframes(sequence, scans, velocities, image, cfg.odometry, descriptor)
+    return (scans, *content)
 
 
 def keyframe_rows(
@@ -177,21 +213,25 @@ def keyframe_rows(
     return rows
 
 
-def build_map(results: Results, sequence: RadarSequence, poses: FloatArray | None = None) -> Map:
-    """A one-session map of a SLAM run (keyframes from `results.slam`, or from `poses`).
+def build_map(
+    results: Results, sequence: RadarSequence | None = None, poses: FloatArray | None = None
+) -> Map:
+    """A one-session map of a SLAM run (keyframes at their poses in `results.slam`, or `poses`).
 
     Args:
         results: the run.
-        sequence: the sequence it ran on (keyframe scans are read again).
+        sequence: the sequence it ran on, read again only when the run kept no keyframes
+            (`Pipeline(record_map=True)` keeps them).
         poses: (N, 3) poses to use instead of `results.slam` (e.g. already in another frame).
+
+    Raises:
+        RadarSlamError: no recorded keyframes and no sequence.
     """
     cfg = results.config.maps
     descriptor_cfg = results.config.loop_closure.raplace.descriptor
     slam = results.slam if poses is None else Trajectory(results.slam.timestamps_ns, poses)
-    scans = select_keyframes(slam.poses, cfg.keyframe_spacing_m)
-    velocities = step_velocities(results.odometry_results, results.config.odometry)
-    descriptors, images, scales = describe_keyframes(
-        sequence, scans, velocities, cfg.image, results.config.odometry, descriptor_cfg
+    scans, descriptors, images, scales = keyframe_content(
+        results, sequence, cfg.image, descriptor_cfg
     )
     stamps = slam.timestamps_ns
     keyframes = keyframe_rows(0, scans, stamps, slam.poses, results.ground_truth_poses, scales)

@@ -68,7 +68,7 @@ class MapsConfig:
     """Map building and use.
 
     Attributes:
-        keyframe_spacing_m: a scan becomes a map keyframe after this much SLAM path [m].
+        keyframe_spacing_m: a scan becomes a map keyframe after this much odometry path [m].
         image: the stored keyframe images (`radar_slam.maps.images.ImageGeometry`).
         localization: relocalisation and tracking (`LocalizerConfig`).
     """

@@ -47,11 +47,10 @@ from radar_slam.loops.sweep_twist import scan_sweep_twist, step_velocities
 from radar_slam.maps.build import (
     EDGE_KINDS,
     build_map,
-    describe_keyframes,
     edge_rows,
     information_upper,
+    keyframe_content,
     keyframe_rows,
-    select_keyframes,
 )
 from radar_slam.maps.format import EDGE_DTYPE, Map, Session
 from radar_slam.maps.localizer import (
@@ -237,15 +236,13 @@ def joint_graph(
 def extended_map(
     m: Map, results: Results, sequence: RadarSequence, poses: FloatArray, loops: list[LoopDecision]
 ) -> Map:
-    """`m` with the session appended (keyframes every `keyframe_spacing_m` of `poses`)."""
+    """`m` with the session appended (keyframes every `keyframe_spacing_m` of the odometry path,
+    as in the run's own map, at `poses`: the session's poses in the map frame)."""
     config = results.config
-    scans = select_keyframes(poses, config.maps.keyframe_spacing_m)
-    descriptors, images, scales = describe_keyframes(
+    scans, descriptors, images, scales = keyframe_content(
+        results,
         sequence,
-        scans,
-        step_velocities(results.odometry_results, config.odometry),
         image_geometry_of(m),
-        config.odometry,
         descriptor_config_of(m, config.loop_closure.raplace.descriptor),
     )
     stamps = results.slam.timestamps_ns

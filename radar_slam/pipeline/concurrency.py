@@ -12,7 +12,10 @@ Both keep the results independent of timing:
   result, is the same. The detector needs only odometry poses, never the graph. A scan may come
   with its conditioned form from the odometry (`odometry.Odometry.prepared`), which the runner
   offers to the detector's verifier (`GeometricVerifier.offer`) just before the detector sees the
-  scan, so a query is not conditioned twice.
+  scan, so a query is not conditioned twice. The map keyframes, which need only the odometry
+  too, are made in the same thread right after the detector has seen the scan
+  (`radar_slam.maps.keyframes`): the conditioned form is the one the odometry made, and the
+  descriptor the one the detector made, when it made one.
 
 Every reading of the sequence goes through one lock (`LockedReader`): a loader may keep a file
 open (ROS bags), and the loop detector re-reads database scans from its own thread.
@@ -28,11 +31,12 @@ from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 import numpy as np
-from numpy.typing import NDArray
 
+from odometry import OdometryResult
 from odometry.registration import PreparedScan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.loops import LoopConstraint, LoopDecision, LoopDetectorProtocol
+from radar_slam.maps.keyframes import KeyframeStage, NullKeyframeRecorder
 from radar_slam.pipeline.steps import StepTimer
 
 T = TypeVar("T")
@@ -153,13 +157,22 @@ class InlineLoopRunner:
     Args:
         detector: the loop detector (keys = scan indices).
         lag: scans between a scan and the moment its loops are handed out (>= 0).
-        timer: accumulates the detector's time as "loop detection".
+        timer: accumulates the detector's time as "loop detection", the keyframes' as
+            "map keyframes".
+        keyframes: fed every scan after the detector (default: keeps nothing).
     """
 
-    def __init__(self, detector: LoopDetectorProtocol, lag: int, timer: StepTimer) -> None:
+    def __init__(
+        self,
+        detector: LoopDetectorProtocol,
+        lag: int,
+        timer: StepTimer,
+        keyframes: KeyframeStage | None = None,
+    ) -> None:
         self.detector = detector
         self.lag = lag
         self.timer = timer
+        self.keyframes: KeyframeStage = NullKeyframeRecorder() if keyframes is None else keyframes
         self._done: deque[LoopStep] = deque()
         self._last = LoopStep(-1, [], (0, 0), [])
         self._state: tuple[int, tuple[int, int]] = (0, (0, 0))
@@ -180,13 +193,14 @@ class InlineLoopRunner:
     def submit(
         self,
         frame: RadarFrame,
-        pose: NDArray[np.float64],
+        result: OdometryResult,
         key: int,
         prepared: PreparedScan | None = None,
     ) -> None:
-        """Offer a scan with its odometry pose T_world_scan (3,) to the detector, and its
-        conditioned form (if given) to the detector's verifier."""
-        self._done.append(self._step(frame, pose, key, prepared))
+        """Offer a scan with its odometry result (its pose T_world_scan) to the detector, then
+        to the map keyframes, and its conditioned form (if given) to the detector's verifier
+        and the keyframes."""
+        self._done.append(self._step(frame, result, key, prepared))
 
     def due(self, key: int) -> list[LoopConstraint]:
         """The loops of the scans up to `key - lag` not handed out yet (call once per scan)."""
@@ -219,14 +233,16 @@ class InlineLoopRunner:
     def _step(
         self,
         frame: RadarFrame,
-        pose: NDArray[np.float64],
+        result: OdometryResult,
         key: int,
         prepared: PreparedScan | None = None,
     ) -> LoopStep:
         if prepared is not None and self._offer is not None:
             self._offer(key, prepared)
         with self.timer("loop detection"):
-            loops = self.detector.add(frame, pose, key)
+            loops = self.detector.add(frame, np.array(result.pose, dtype=np.float64), key)
+        with self.timer("map keyframes"):
+            self.keyframes.add(frame, None if prepared is None else prepared.polar, result)
         tally = self.detector.tally()
         # New decisions come with new proposals, status changes change the tally: copy the
         # decisions only then.
@@ -243,10 +259,16 @@ class ThreadedLoopRunner(InlineLoopRunner):
     An error of the detector is raised in the caller's thread when that scan's loops are due.
     """
 
-    def __init__(self, detector: LoopDetectorProtocol, lag: int, timer: StepTimer) -> None:
-        super().__init__(detector, lag, timer)
+    def __init__(
+        self,
+        detector: LoopDetectorProtocol,
+        lag: int,
+        timer: StepTimer,
+        keyframes: KeyframeStage | None = None,
+    ) -> None:
+        super().__init__(detector, lag, timer, keyframes)
         self._inbox: queue.Queue[
-            tuple[RadarFrame, NDArray[np.float64], int, PreparedScan | None] | None
+            tuple[RadarFrame, OdometryResult, int, PreparedScan | None] | None
         ] = queue.Queue()
         self._outbox: queue.Queue[_Outcome[LoopStep]] = queue.Queue()
         self._submitted: deque[int] = deque()
@@ -275,12 +297,12 @@ class ThreadedLoopRunner(InlineLoopRunner):
     def submit(
         self,
         frame: RadarFrame,
-        pose: NDArray[np.float64],
+        result: OdometryResult,
         key: int,
         prepared: PreparedScan | None = None,
     ) -> None:
         self._submitted.append(key)
-        self._inbox.put((frame, np.array(pose, dtype=np.float64), key, prepared))
+        self._inbox.put((frame, result, key, prepared))
 
     def due(self, key: int) -> list[LoopConstraint]:
         loops: list[LoopConstraint] = []
@@ -320,8 +342,12 @@ def offer_of(detector: LoopDetectorProtocol) -> Offer | None:
 
 
 def make_loop_runner(
-    detector: LoopDetectorProtocol, lag: int, threaded: bool, timer: StepTimer
+    detector: LoopDetectorProtocol,
+    lag: int,
+    threaded: bool,
+    timer: StepTimer,
+    keyframes: KeyframeStage | None = None,
 ) -> InlineLoopRunner:
     """A `ThreadedLoopRunner` when `threaded`, else an `InlineLoopRunner`."""
     runner = ThreadedLoopRunner if threaded else InlineLoopRunner
-    return runner(detector, lag, timer)
+    return runner(detector, lag, timer, keyframes)

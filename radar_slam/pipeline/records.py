@@ -16,6 +16,7 @@ from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
     LoopDecision,
 )
+from radar_slam.maps.keyframes import RecordedKeyframes
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.trajectory import Trajectory
 
@@ -32,6 +33,8 @@ class Progress:
         loops_accepted: loops accepted so far.
         loops_rejected: verified proposals rejected so far.
         elapsed_s: wall time since the start [s].
+        step: what the run does after its last scan ("last loops", "optimisation",
+            "evaluation"); empty while it processes scans.
     """
 
     done: int
@@ -39,6 +42,7 @@ class Progress:
     loops_accepted: int
     loops_rejected: int
     elapsed_s: float
+    step: str = ""
 
 
 ProgressCallback = Callable[[Progress], None]
@@ -104,6 +108,9 @@ class Results:
         odometry_metrics, slam_metrics: full accuracy figures, None without ground truth.
         gt_report: the GT's source and estimated clock offset, with the metrics through that
             offset; None without ground truth.
+        map_keyframes: the map keyframes made during the run (`radar_slam.maps.keyframes`), so
+            that the map is written without reading a scan again; None unless the run was asked
+            to keep them (`Pipeline(record_map=True)`).
     """
 
     sequence: str
@@ -121,6 +128,7 @@ class Results:
     odometry_metrics: TrajectoryMetrics | None
     slam_metrics: TrajectoryMetrics | None
     gt_report: GroundTruthReport | None = None
+    map_keyframes: RecordedKeyframes | None = None
 
     @property
     def accepted_loops(self) -> list[LoopDecision]:

@@ -46,6 +46,12 @@ from radar_slam.loops import (
     LoopDetectorProtocol,
     make_loop_detector,
 )
+from radar_slam.maps.keyframes import (
+    KeyframeRecorder,
+    KeyframeStage,
+    NullKeyframeRecorder,
+    RecordedKeyframes,
+)
 from radar_slam.pipeline.concurrency import (
     InlineLoopRunner,
     LockedReader,
@@ -87,6 +93,8 @@ class Pipeline:
             indices.
         observer: watches the run scan by scan (e.g. the live viewer); see
             `radar_slam.pipeline.observer.PipelineObserver`.
+        record_map: keep each map keyframe's descriptor and image as the run goes
+            (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again).
     """
 
     def __init__(
@@ -97,6 +105,7 @@ class Pipeline:
         progress: ProgressCallback | None = None,
         loop_detector: LoopDetectorProtocol | None = None,
         observer: PipelineObserver | None = None,
+        record_map: bool = False,
     ) -> None:
         self.sequence = sequence
         self.observer = observer
@@ -105,8 +114,13 @@ class Pipeline:
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
         self._read_scan = LockedReader(sequence)
+        self.keyframes = self._keyframe_stage(record_map)
         self.loop_detector: LoopDetectorProtocol = (
-            make_loop_detector(self.config.loop_closure, scan_loader=self._reread)
+            make_loop_detector(
+                self.config.loop_closure,
+                scan_loader=self._reread,
+                on_describe=self.keyframes.offer_descriptor,
+            )
             if loop_detector is None
             else loop_detector
         )
@@ -119,8 +133,13 @@ class Pipeline:
         self._start = 0.0
         concurrency = self.config.concurrency
         self.loops: InlineLoopRunner = make_loop_runner(
-            self.loop_detector, concurrency.loop_lag_scans, concurrency.loop_thread, self.timer
+            self.loop_detector,
+            concurrency.loop_lag_scans,
+            concurrency.loop_thread,
+            self.timer,
+            self.keyframes,
         )
+        self._map_keyframes: RecordedKeyframes | None = None
         """The loop detector as the graph has seen it: `loops.tally()` and `loops.decisions`
         are those of the loops added to the graph so far (read these, not the detector's, while
         the run goes on: the detector may be ahead on its thread)."""
@@ -148,16 +167,28 @@ class Pipeline:
             if held is not None:
                 self._extend_graph(self.odometry.result(self.frames - 1))
                 self._submit(*held, self.frames - 1)
+            self._report(self.frames, "last loops")
             self._close_loops(self.loops.finish(), None)
+            with self.timer("map keyframes"):
+                self._map_keyframes = self.keyframes.finish()
         finally:
             reader.close()
             self.loops.close()
+        self._report(self.frames, "optimisation")
         self._optimise()
         self._review_loops()
+        self._report(self.frames, "evaluation")
         results = self._evaluate(time.perf_counter() - self._start)
         if self.observer is not None:
             self.observer.on_finish(results)
         return results
+
+    def _keyframe_stage(self, record_map: bool) -> KeyframeStage:
+        """The map keyframes of the run: made as it goes, or not kept."""
+        if not record_map:
+            return NullKeyframeRecorder()
+        cfg = self.config
+        return KeyframeRecorder(cfg.maps, cfg.odometry, cfg.loop_closure.raplace.descriptor)
 
     # -- per-scan steps -----------------------------------------------------------------------
     def _read(self, reader: ScanReader) -> RadarFrame:
@@ -176,7 +207,7 @@ class Pipeline:
         """Hand scan `index` to the loop detector once the next scan has registered, with its
         revised pose: the prompt pose of a scan swept across a yaw-rate step can be off by tens
         of deg/s in the velocity the detector de-skews it with (the last scan: its prompt pose)."""
-        self.loops.submit(frame, self.odometry.result(index).pose, index, prepared)
+        self.loops.submit(frame, self.odometry.result(index), index, prepared)
 
     def _extend_graph(self, result: OdometryResult) -> None:
         """Add a scan to the graph once the next scan has registered, with its revised pose (its
@@ -212,12 +243,13 @@ class Pipeline:
                 self._loops_pending = self._loops_correct = False
                 self._last_update = index
 
-    def _report(self, done: int) -> None:
+    def _report(self, done: int, step: str = "") -> None:
+        """Report `done` scans to the progress callback (`step`: what follows the last scan)."""
         if self.progress is None:
             return
         accepted, rejected = self.loops.tally()
         elapsed = time.perf_counter() - self._start
-        self.progress(Progress(done, self.frames, accepted, rejected, elapsed))
+        self.progress(Progress(done, self.frames, accepted, rejected, elapsed, step))
 
     # -- final steps --------------------------------------------------------------------------
     def _optimise(self) -> None:
@@ -274,4 +306,5 @@ class Pipeline:
             odometry_metrics=odometry_metrics,
             slam_metrics=slam_metrics,
             gt_report=report,
+            map_keyframes=self._map_keyframes,
         )

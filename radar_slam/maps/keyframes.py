@@ -1,0 +1,260 @@
+"""Map keyframes made as a run goes: each keyframe's descriptor and image, made once.
+
+A map stores, per keyframe, its RaPlace descriptor and its de-skewed Cartesian image
+(`radar_slam.maps.images`). `KeyframeRecorder` receives every scan of a run once the odometry has
+registered the scan after it: the raw scan, its conditioned form (`odometry.Odometry.prepared`)
+and its odometry result. It picks the keyframes along the odometry path (`KeyframeSpacing`) and
+makes their descriptor and image as soon as the step after the scan is known (the image is
+de-skewed with the scan's sweep twist, `radar_slam.loops.sweep_twist`); a descriptor the loop
+detector made of the same scan is taken rather than made again (`offer_descriptor`). It keeps
+what the map stores (about 30 kB per keyframe at the default image geometry), never the scans,
+so that `radar_slam.maps.build.build_map` writes the map without reading a scan again.
+
+`describe_keyframe` is the one recipe of a keyframe's content, used by the recorder and by the
+rebuild from a sequence (`radar_slam.maps.build.describe_keyframes`): a map made either way is
+the same.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from odometry import OdometryConfig, OdometryResult, Scan
+from odometry.preprocess import PolarScan, preprocess_polar
+from odometry.velocity import Velocity
+from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_velocity, sweep_twist
+from radar_slam.maps.config import MapsConfig
+from radar_slam.maps.images import ImageGeometry, KeyframeImager
+from raplace.config import DescriptorConfig
+from raplace.descriptor import DescriptorExtractor
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+DESCRIPTOR_DTYPE = np.float16
+"""How a map stores its descriptors (half precision: half the bytes, ample for retrieval)."""
+
+
+class KeyframeSpacing:
+    """The keyframe rule, one pose at a time: the first pose, then one each time the path since
+    the previous keyframe reaches `spacing_m` [m] (`radar_slam.maps.build.select_keyframes` applies
+    it to a whole trajectory)."""
+
+    def __init__(self, spacing_m: float) -> None:
+        self.spacing_m = spacing_m
+        self._travelled = 0.0
+        self._last: FloatArray | None = None
+
+    def is_keyframe(self, pose: ArrayLike) -> bool:
+        """Whether the next pose (x, y [m], yaw) is a keyframe."""
+        position = np.asarray(pose, dtype=np.float64).reshape(-1)[:2]
+        if self._last is None:
+            self._last = position
+            return True
+        step = np.hypot(*(position - self._last))
+        self._last = position
+        self._travelled += float(step)
+        if self._travelled >= self.spacing_m:
+            self._travelled = 0.0
+            return True
+        return False
+
+
+@dataclass(frozen=True)
+class KeyframeRecord:
+    """What a map stores of one keyframe.
+
+    Attributes:
+        scan: the scan's index in the run.
+        descriptor: (n_theta, n_freq) RaPlace descriptor, `DESCRIPTOR_DTYPE`.
+        png: the PNG bytes of its de-skewed Cartesian image (`KeyframeImager.encode`).
+        image_scale: the image's intensity scale (`KeyframeImager.encode`).
+    """
+
+    scan: int
+    descriptor: NDArray[np.float16]
+    png: bytes
+    image_scale: float
+
+
+@dataclass(frozen=True)
+class RecordedKeyframes:
+    """A run's map keyframes and the settings they were made with.
+
+    Attributes:
+        records: one per keyframe, in scan order.
+        spacing_m: the keyframe spacing along the odometry path [m].
+        image: the image geometry.
+        descriptor: the RaPlace descriptor settings.
+        odometry: the odometry settings (the images' conditioning and de-skew limits).
+    """
+
+    records: tuple[KeyframeRecord, ...]
+    spacing_m: float
+    image: ImageGeometry
+    descriptor: DescriptorConfig
+    odometry: OdometryConfig
+
+    def made_with(
+        self,
+        spacing_m: float,
+        image: ImageGeometry,
+        descriptor: DescriptorConfig,
+        odometry: OdometryConfig,
+    ) -> bool:
+        """Whether these keyframes are what those settings make."""
+        made = (self.spacing_m, self.image, self.descriptor, self.odometry)
+        return made == (spacing_m, image, descriptor, odometry)
+
+
+def describe_keyframe(
+    scan_index: int,
+    frame: Scan,
+    twist: FloatArray | None,
+    imager: KeyframeImager,
+    describe: DescriptorExtractor,
+    polar: PolarScan | None = None,
+    descriptor: NDArray[np.floating] | None = None,
+) -> KeyframeRecord:
+    """A keyframe's record: its descriptor and its image de-skewed with `twist`.
+
+    Args:
+        scan_index: the scan's index in the run.
+        frame: the raw scan.
+        twist: (3,) its sweep twist (vx, vy [m/s], yaw rate [rad/s]), or None.
+        imager: renders and encodes the image.
+        describe: the RaPlace descriptor extractor.
+        polar: the scan's conditioned form (`preprocess_polar` with the imager's odometry
+            settings), when already made.
+        descriptor: the scan's descriptor made by `describe`, when already made.
+    """
+    if polar is None:
+        polar = preprocess_polar(frame, imager.odometry.preprocess)
+    if descriptor is None:
+        descriptor = describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
+    png, scale = imager.encode(imager.render(polar, twist))
+    return KeyframeRecord(scan_index, np.asarray(descriptor, dtype=DESCRIPTOR_DTYPE), png, scale)
+
+
+@dataclass(frozen=True)
+class _Held:
+    """The last scan received, kept until the step after it is known.
+
+    Attributes:
+        result: its odometry result.
+        before: the velocity of the step into it (None: first scan, or not plausible).
+        frame, polar: the scan and its conditioned form, for a keyframe only (else None).
+    """
+
+    result: OdometryResult
+    before: Velocity | None
+    frame: Scan | None
+    polar: PolarScan | None
+
+
+class KeyframeRecorder:
+    """Picks a run's map keyframes and makes their records as the scans come (see the module doc).
+
+    Call `add` for every scan in order, `offer_descriptor` (optional) between the `add` of a scan
+    and the `add` of the next, and `finish` once after the last; all from one thread.
+
+    Args:
+        maps: the keyframe spacing and image geometry.
+        odometry: the odometry settings (conditioning, the vehicle's limits).
+        descriptor: the RaPlace descriptor settings.
+    """
+
+    def __init__(
+        self, maps: MapsConfig, odometry: OdometryConfig, descriptor: DescriptorConfig
+    ) -> None:
+        self.maps = maps
+        self.odometry = odometry
+        self.descriptor_config = descriptor
+        self.imager = KeyframeImager(maps.image, odometry)
+        self.describe = DescriptorExtractor(descriptor)
+        self.spacing = KeyframeSpacing(maps.keyframe_spacing_m)
+        self._records: list[KeyframeRecord] = []
+        self._held: _Held | None = None
+        self._offered: tuple[int, NDArray[np.float16]] | None = None
+        self.descriptors_taken = 0
+        """Keyframes whose descriptor came from `offer_descriptor` (not made here)."""
+
+    def add(self, frame: Scan, polar: PolarScan | None, result: OdometryResult) -> None:
+        """Receive the next scan: the raw scan, its conditioned form (None: made here when it is
+        a keyframe) and its odometry result (final: the next scan has registered)."""
+        held = self._held
+        before = None if held is None else step_velocity(held.result, result, self.odometry)
+        if held is not None:
+            self._make(held, after=before)
+        if self.spacing.is_keyframe(result.pose):
+            self._held = _Held(result, before, frame, polar)
+        else:
+            self._held = _Held(result, before, None, None)
+
+    def offer_descriptor(self, scan_index: int, descriptor: NDArray[np.floating]) -> None:
+        """The descriptor of a scan made elsewhere (the loop detector, with the same settings):
+        kept when it is the last scan received and a keyframe."""
+        held = self._held
+        if held is not None and held.frame is not None and held.result.index == scan_index:
+            self._offered = (scan_index, np.asarray(descriptor, dtype=DESCRIPTOR_DTYPE))
+
+    def finish(self) -> RecordedKeyframes:
+        """Make the last scan's record (no step after it) and return every keyframe's."""
+        if self._held is not None:
+            self._make(self._held, after=None)
+            self._held = None
+        log.info(
+            "map keyframes: %d made during the run, %d with the loop detector's descriptor",
+            len(self._records),
+            self.descriptors_taken,
+        )
+        return RecordedKeyframes(
+            tuple(self._records),
+            self.maps.keyframe_spacing_m,
+            self.maps.image,
+            self.descriptor_config,
+            self.odometry,
+        )
+
+    def _make(self, held: _Held, after: Velocity | None) -> None:
+        if held.frame is None:
+            return
+        index = held.result.index
+        offered = self._offered
+        self._offered = None
+        descriptor = offered[1] if offered is not None and offered[0] == index else None
+        self.descriptors_taken += descriptor is not None
+        twist = sweep_twist(held.before, after, mean_acquisition_time_ns(held.frame))
+        self._records.append(
+            describe_keyframe(
+                index, held.frame, twist, self.imager, self.describe, held.polar, descriptor
+            )
+        )
+
+
+class KeyframeStage(Protocol):
+    """What a run feeds its map keyframes with (`KeyframeRecorder` or `NullKeyframeRecorder`)."""
+
+    def add(self, frame: Scan, polar: PolarScan | None, result: OdometryResult) -> None: ...
+
+    def offer_descriptor(self, scan_index: int, descriptor: NDArray[np.floating]) -> None: ...
+
+    def finish(self) -> RecordedKeyframes | None: ...
+
+
+class NullKeyframeRecorder:
+    """A recorder that keeps nothing (a run that writes no map)."""
+
+    def add(self, frame: Scan, polar: PolarScan | None, result: OdometryResult) -> None:
+        """Ignore the scan."""
+
+    def offer_descriptor(self, scan_index: int, descriptor: NDArray[np.floating]) -> None:
+        """Ignore the descriptor."""
+
+    def finish(self) -> None:
+        """Nothing was recorded."""

@@ -154,6 +154,7 @@ class SequenceRow:
     gaps: int
     longest_gap_run: int
     frames_per_s: float
+    registrations: float = 0.0
     held_out: bool = False
 
 
@@ -207,6 +208,7 @@ def bench_sequence(
         gaps=len(odometry.gaps),
         longest_gap_run=gap_run,
         frames_per_s=float(1e3 / ms.mean()),
+        registrations=odometry.registrations_per_scan,
         held_out=held_out,
     )
     gt_poses = sequence.ground_truth
@@ -258,19 +260,24 @@ def markdown_table(rows: list[SequenceRow]) -> str:
     """The accuracy table (one line per sequence and stride), held-out sequences last."""
     lines = [
         "| sequence | stride | scans | length [m] | drift [%] | drift [deg/100 m] | ATE [m] "
-        "| gaps | longest gap run |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| gaps | longest gap run | registrations per scan |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for held_out in (False, True):
         chosen = [r for r in rows if r.held_out == held_out]
         if held_out and chosen:
-            lines.append("| **held out** | | | | | | | | |")
+            lines.append("| **held out** | | | | | | | | | |")
         for r in chosen:
             lines.append(
                 f"| `{r.spec}` | {r.stride} | {r.frames} | {_fmt(r.length_m, 0)} "
                 f"| {_fmt(r.drift_pct, 2)} | {_fmt(r.drift_deg_per_100m, 2)} "
-                f"| {_fmt(r.ate_m, 2)} | {r.gaps} | {r.longest_gap_run} |"
+                f"| {_fmt(r.ate_m, 2)} | {r.gaps} | {r.longest_gap_run} | {r.registrations:.2f} |"
             )
+    means = [
+        f"stride {stride}: {np.mean([r.registrations for r in rows if r.stride == stride]):.2f}"
+        for stride in sorted({r.stride for r in rows})
+    ]
+    lines += ["", f"Registrations per scan, mean over the drives: {', '.join(means)}."]
     return "\n".join(lines) + "\n"
 
 

@@ -17,8 +17,9 @@ class LocalizerConfig:
         max_descriptor_distance: candidates at or above this RaPlace distance are not verified.
         relocalise_every_m: while lost, a global attempt after this much travel [m] (0: every
             scan).
-        confirm_max_error_m: a global fix is only believed once a second one, this much travel
-            later or more, agrees with it through the odometry within this distance [m] ...
+        confirm_max_error_m: a global fix is only believed once further ones, each this much
+            travel later or more, agree with the previous through the odometry within this
+            distance [m] (how many: `radar_slam.maps.localizer.CONFIRM_HYPOTHESES`) ...
         confirm_max_error_deg: ... and this rotation [deg].
         fix_every_m: while tracking, a map fix is attempted after this much travel [m].
         search_radius_m: tracking fixes use the map keyframes within this distance of the

@@ -31,6 +31,8 @@ MAP_FRAMES = 110
 """Scans of tiny_loop that make the map (the first lap and a bit)."""
 OTHER_TOWN_SCANS = 120
 """Scans of the other town's drive localised in the tiny town's map."""
+TRACKED_BEFORE_FAILURE = 10
+"""Tracked scans before the map registrations are made to fail."""
 
 
 @pytest.fixture(scope="module")
@@ -335,3 +337,33 @@ def test_a_session_elsewhere_never_meets_the_map(tiny: RadarSequence, oxford_dir
     assert not any(d.accepted for d in joined.loops)
     np.testing.assert_allclose(joined.results.slam.poses, run.slam.poses)
     assert [s.sequence for s in joined.map.sessions] == [run.sequence]
+
+
+def test_a_tracked_pose_whose_fixes_fail_is_reported_lost(
+    reverse_map: Map, reverse_pair: tuple[RadarSequence, RadarSequence]
+) -> None:
+    """Once tracking, every map registration fails from some scan on (as on a street the map
+    no longer shows): the scans are tracked on odometry only until the second failed fix
+    attempt, then reported lost, before `lost_after_m`."""
+    b = reverse_pair[1]
+    config = load_config("synthetic")
+    localizer = Localizer(reverse_map, config)
+    statuses = []
+    for n in range(len(b)):
+        if statuses.count("tracked") == TRACKED_BEFORE_FAILURE:
+            localizer._tracking_fix = lambda *_: None  # type: ignore[method-assign]
+        statuses.append(localizer.localize(b[n]).status)
+    failed_from = statuses.index("tracked") + TRACKED_BEFORE_FAILURE
+    first_lost = statuses.index("lost", failed_from)
+    assert set(statuses[failed_from:first_lost]) == {"tracked"}
+    # Lost until global relocalisation (its registrations still work) places the scans again.
+    again = (
+        statuses.index("relocalised", first_lost)
+        if "relocalised" in statuses[first_lost:]
+        else len(statuses)
+    )
+    assert set(statuses[first_lost:again]) == {"lost"} and again - first_lost >= 3
+    path = np.hypot(*np.diff(np.asarray(b.ground_truth)[:, :2], axis=0).T)
+    cfg = config.maps.localization
+    unfixed_m = float(np.sum(path[failed_from - 1 : first_lost]))
+    assert cfg.fix_every_m < unfixed_m < cfg.lost_after_m

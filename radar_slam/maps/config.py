@@ -15,11 +15,11 @@ class LocalizerConfig:
     Attributes:
         candidates: RaPlace candidates verified per global relocalisation attempt.
         max_descriptor_distance: candidates at or above this RaPlace distance are not verified.
-        relocalise_every_m: while lost, a global attempt after this much travel [m] (0: every
-            scan).
-        confirm_max_error_m: a global fix is only believed once further ones, each this much
-            travel later or more, agree with the previous through the odometry within this
-            distance [m] (how many: `radar_slam.maps.localizer.CONFIRM_HYPOTHESES`) ...
+        relocalise_every_m: while lost with no hypothesis held, a global attempt after this much
+            travel [m] (0: every scan); once one is held, every scan is an attempt.
+        confirm_max_error_m: a global fix is only believed once further hypotheses agree, each
+            with the previous one carried forward by the odometry, within this distance [m]
+            (how many: `radar_slam.maps.localizer.CONFIRM_HYPOTHESES`) ...
         confirm_max_error_deg: ... and this rotation [deg].
         fix_every_m: while tracking, a map fix is attempted after this much travel [m].
         search_radius_m: tracking fixes use the map keyframes within this distance of the

@@ -411,6 +411,7 @@ def run_evaluation(
         matches = match_intra_session(query.frames(f"pr {label}"), runs, counts)
         map_frames, mode = query, "intra"
     else:
+        exclude_metres = 0.0  # every map frame is a candidate
         runs = method_runs(methods, cfg)
         build_map(reference.frames(f"map {spec_name(reference.sequence)}"), runs)
         matches = match_queries(query.frames(f"query {label}"), runs)

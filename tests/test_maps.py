@@ -188,7 +188,8 @@ def test_localize_the_revisit_in_the_map(tiny_map: Map, tiny_loop: RadarSequence
     assert metrics is not None
     assert metrics.relocalisations >= 1
     assert metrics.wrong_localised == 0
-    assert metrics.near_route_correct is not None and metrics.near_route_correct >= 0.85
+    # Near the route but lost: the scans before hypotheses from three keyframes agree.
+    assert metrics.near_route_correct is not None and metrics.near_route_correct >= 0.8
     assert metrics.max_error_m is not None and metrics.max_error_m < 2.0
 
 
@@ -253,7 +254,7 @@ def test_reverse_session_localised_in_the_map(
     assert metrics is not None and metrics.relocalisations >= 1
     assert metrics.near_route_correct is not None and metrics.near_route_correct >= 0.95
     assert metrics.wrong_localised == 0
-    assert metrics.fraction_localised >= 0.85  # lost: the scans before the chain agrees
+    assert metrics.fraction_localised >= 0.8  # lost: the scans before the chain agrees
     # Each localised pose comes relative to its map keyframe with a covariance.
     for f in (f for f in fixes if f.localised):
         np.testing.assert_allclose(

@@ -6,12 +6,12 @@
   looked up in the whole map (no exclusion window) and the best candidates are verified as loops
   are (`radar_slam.loops.GeometricVerifier`, both pi hypotheses of the rotation, against the
   keyframe's stored image made back into a scan); each that verifies gives a pose hypothesis
-  T_map_scan = T_map_keyframe * z^-1, best registration quality first. A hypothesis is only
-  believed once it heads a chain of `CONFIRM_HYPOTHESES` (attempted at every scan once one is
-  held), each agreeing with the previous one carried forward by the odometry
-  (`confirm_max_error_m/_deg`), from at least two distinct keyframes: the keyframes' own map
-  poses must then agree with each other and with the path driven, which a wrong match, or a run
-  of them on a repetitive street, rarely does.
+  T_map_scan = T_map_keyframe * z^-1, best registration quality first. Hypotheses are only
+  believed once they make a chain (attempted at every scan once one is held), each agreeing with
+  the previous one carried forward by the odometry (`confirm_max_error_m/_deg`), from
+  `CONFIRM_KEYFRAMES` distinct keyframes over `CONFIRM_SCANS` scans or more: the keyframes' own
+  map poses must then agree with each other and with the path driven, which a wrong match, or a
+  run of them on a repetitive street, rarely does.
 - **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is registered by
   phase correlation (`odometry.registration`, the loop verifier's refinement stage, with the
   predicted relative yaw in place of its sinogram stage) against the nearest map keyframes to
@@ -76,10 +76,14 @@ MAP_KEY_BASE = 1 << 40
 IMAGE_CACHE_SIZE = 64
 """Map keyframes kept as ready-made scans."""
 _WINDOW_GRAPH = GraphConfig(final_pass="lm")
-CONFIRM_HYPOTHESES = 3
-"""Agreeing global hypotheses in a row (from at least two keyframes) before a fix is believed:
-two can agree by chance on a street of repeated facades, a third agreeing through the odometry
-rarely does; matches to one keyframe alone agree with each other whatever its map pose."""
+CONFIRM_KEYFRAMES = 3
+"""Distinct map keyframes a chain of agreeing global hypotheses must come from before a fix is
+believed: matches to one keyframe agree with each other whatever its map pose, and two
+neighbouring keyframes of a wrong street, repeated facades for instance, can agree with each
+other and with a short drive; a third rarely does."""
+CONFIRM_SCANS = 2
+"""Scans the chain must span: the odometry between them checks the keyframes' relative poses
+against the path driven, which one scan's matches alone cannot."""
 FAILED_FIXES_LOST = 2
 """Tracking fix attempts failing in a row after which the scans are reported lost: one can fail
 on a passing truck; two in a row mean the map no longer supports the pose, which is then only
@@ -318,7 +322,8 @@ class Localizer:
         for fix in self._verified(query, candidates):
             self._extend_chain(fix)
         chain = state.chain
-        if len(chain) < CONFIRM_HYPOTHESES or len({f.keyframe for f, _, _ in chain}) < 2:
+        keyframes, scans = {f.keyframe for f, _, _ in chain}, {f.scan for f, _, _ in chain}
+        if len(keyframes) < CONFIRM_KEYFRAMES or len(scans) < CONFIRM_SCANS:
             return False
         self._start_tracking()
         self.relocalisations += 1
@@ -354,12 +359,11 @@ class Localizer:
         """Track from the agreeing chain: its fixes, joined by the odometry, fill the window."""
         state = self.state
         chain, state.chain = state.chain, []
-        first = chain[0][0]
-        state.window = [_Node(first.scan, np.zeros(3), np.zeros((3, 3)), first, first.pose)]
+        state.window = []
         state.tracking = True
         state.failed_fixes = 0
-        for fix, motion, covariance in chain[1:]:
-            if fix.scan != state.window[-1].scan:  # one fix per scan: the best, verified first
+        for fix, motion, covariance in chain:
+            if not state.window or fix.scan != state.window[-1].scan:  # one fix per scan
                 self._add_node(fix, motion, covariance)
 
     # -- tracking -----------------------------------------------------------------------------

@@ -189,7 +189,7 @@ def test_localize_the_revisit_in_the_map(tiny_map: Map, tiny_loop: RadarSequence
     assert metrics.relocalisations >= 1
     assert metrics.wrong_localised == 0
     # Near the route but lost: the scans before hypotheses from three keyframes agree.
-    assert metrics.near_route_correct is not None and metrics.near_route_correct >= 0.8
+    assert metrics.near_route_correct is not None and metrics.near_route_correct >= 0.85
     assert metrics.max_error_m is not None and metrics.max_error_m < 2.0
 
 
@@ -272,13 +272,16 @@ def shuffled(m: Map, seed: int) -> Map:
     return dataclasses.replace(m, keyframes=keyframes)
 
 
+@pytest.mark.parametrize("seed", [0, 3])
 def test_a_map_of_wrong_places_places_no_scan(
-    reverse_map: Map, reverse_pair: tuple[RadarSequence, RadarSequence]
+    reverse_map: Map, reverse_pair: tuple[RadarSequence, RadarSequence], seed: int
 ) -> None:
     """Keyframes under wrong poses: single matches verify, but their hypotheses never agree
-    along the path driven, so no scan is placed (all lost) and none is off."""
+    along the path driven, so no scan is placed (all lost) and none is off. Under seed 3 two
+    neighbouring keyframes land on neighbouring wrong poses, a wrong street with the right
+    local geometry: their hypotheses agree, and only a third keyframe refuses them."""
     b = reverse_pair[1]
-    localizer = Localizer(shuffled(reverse_map, seed=0), load_config("synthetic"))
+    localizer = Localizer(shuffled(reverse_map, seed=seed), load_config("synthetic"))
     fixes = [localizer.localize(b[n]) for n in range(len(b))]
     assert not any(f.localised for f in fixes)
     assert localizer.global_attempts > 0 and localizer.relocalisations == 0

@@ -24,7 +24,8 @@ class LocalizerConfig:
         fix_every_m: while tracking, a map fix is attempted after this much travel [m].
         search_radius_m: tracking fixes use the map keyframes within this distance of the
             predicted pose [m], nearest first.
-        fix_keyframes: at most this many keyframes are tried per tracking fix.
+        fix_keyframes: at most this many keyframes are tried per tracking fix (and per
+            attempt to complete a relocalisation's agreeing hypotheses with one).
         max_innovation_m: a tracking fix farther than this from the prediction is refused [m] ...
         max_innovation_deg: ... or turned more than this from it [deg].
         lost_after_m: tracking without a successful fix for this much travel is lost [m].

@@ -11,7 +11,9 @@
   the previous one carried forward by the odometry (`confirm_max_error_m/_deg`), from
   `CONFIRM_KEYFRAMES` distinct keyframes over `CONFIRM_SCANS` scans or more: the keyframes' own
   map poses must then agree with each other and with the path driven, which a wrong match, or a
-  run of them on a repetitive street, rarely does.
+  run of them on a repetitive street, rarely does. The last keyframe may come from a tracking
+  fix (below) against the keyframes nearest the chain's pose: entering the map's route, the
+  vehicle matches the first keyframes long before a third is among the global candidates.
 - **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is registered by
   phase correlation (`odometry.registration`, the loop verifier's refinement stage, with the
   predicted relative yaw in place of its sinogram stage) against the nearest map keyframes to
@@ -80,7 +82,7 @@ CONFIRM_KEYFRAMES = 3
 """Distinct map keyframes a chain of agreeing global hypotheses must come from before a fix is
 believed: matches to one keyframe agree with each other whatever its map pose, and two
 neighbouring keyframes of a wrong street, repeated facades for instance, can agree with each
-other and with a short drive; a third rarely does."""
+other and with a short drive; a third rarely does (`Localizer._complete_chain`)."""
 CONFIRM_SCANS = 2
 """Scans the chain must span: the odometry between them checks the keyframes' relative poses
 against the path driven, which one scan's matches alone cannot."""
@@ -343,28 +345,57 @@ class Localizer:
         ]
         for fix in self._verified(query, candidates):
             self._extend_chain(fix)
-        chain = state.chain
-        keyframes, scans = {f.keyframe for f, _, _ in chain}, {f.scan for f, _, _ in chain}
+        keyframes, scans = self._chain_span()
+        if len(keyframes) == CONFIRM_KEYFRAMES - 1 and len(scans) >= CONFIRM_SCANS:
+            self._complete_chain(query, keyframes)
+            keyframes, scans = self._chain_span()
         if len(keyframes) < CONFIRM_KEYFRAMES or len(scans) < CONFIRM_SCANS:
             return False
         self._start_tracking()
         self.relocalisations += 1
         return True
 
+    def _chain_span(self) -> tuple[set[int], set[int]]:
+        """The distinct map keyframes and scans of the chain's hypotheses."""
+        chain = self.state.chain
+        return {f.keyframe for f, _, _ in chain}, {f.scan for f, _, _ in chain}
+
+    def _complete_chain(self, query: KeyScan, keyframes: set[int]) -> None:
+        """A chain one keyframe short of `CONFIRM_KEYFRAMES` may take its last one from a
+        tracking fix: the scan registered, as while tracking, against the map keyframes nearest
+        the chain's pose that are not in it, `fix_keyframes` of them whatever their distance
+        (a vehicle entering the map's route sees the keyframes beyond the two it matched from
+        farther than `search_radius_m`; one too far to share its view fails the registration or
+        the innovation gate). A fix that does not agree with the chain is dropped: it comes from
+        the chain's own prediction, so it never starts one."""
+        state = self.state
+        predicted = compose(state.chain[-1][0].pose, state.pending_since)
+        nearest = self.keyframes.near(predicted, np.inf, self.cfg.fix_keyframes + len(keyframes))
+        for kf in [k for k in nearest if k not in keyframes][: self.cfg.fix_keyframes]:
+            fix = self._tracking_fix(query, kf, predicted)
+            if fix is not None and self._joins_chain(fix):
+                return
+
     def _extend_chain(self, fix: _Fix) -> None:
-        """Add a hypothesis to the chain when it agrees with the latest one carried forward by
-        the odometry; else it starts a new chain (unless it is a weaker one of the same scan)."""
-        cfg, state = self.cfg, self.state
-        if state.chain:
-            previous = state.chain[-1][0]
-            carried = compose(previous.pose, state.pending_since)
-            if self._agrees(carried, fix.pose, cfg.confirm_max_error_m, cfg.confirm_max_error_deg):
-                state.chain.append((fix, state.pending_since.copy(), state.pending_cov.copy()))
-                self._restart_pending()
-                return
-            if previous.scan == fix.scan:
-                return
+        """Add a hypothesis to the chain when it agrees with it; else it starts a new chain
+        (unless it is a weaker one of the same scan)."""
+        chain = self.state.chain
+        if self._joins_chain(fix) or (chain and chain[-1][0].scan == fix.scan):
+            return
         self._hold(fix)
+
+    def _joins_chain(self, fix: _Fix) -> bool:
+        """Append `fix` to the chain if it agrees with the latest hypothesis carried forward by
+        the odometry (`confirm_max_error_m/_deg`)."""
+        cfg, state = self.cfg, self.state
+        if not state.chain:
+            return False
+        carried = compose(state.chain[-1][0].pose, state.pending_since)
+        if not self._agrees(carried, fix.pose, cfg.confirm_max_error_m, cfg.confirm_max_error_deg):
+            return False
+        state.chain.append((fix, state.pending_since.copy(), state.pending_cov.copy()))
+        self._restart_pending()
+        return True
 
     def _hold(self, fix: _Fix) -> None:
         """Start a chain of agreeing hypotheses with `fix`."""

@@ -8,9 +8,11 @@ Protocol (the one of the radar place-recognition papers: Scan Context, MulRan, R
 Every evaluated frame is a query. Its *candidates* are
 
 - intra-session: the earlier frames of the same sequence, except the `recent_keyframes` most
-  recent ones (and, when `recent_seconds` > 0, those less than that many seconds older), i.e.
-  exactly the entries `raplace.retrieval.candidate_mask` lets the recognizer see when frames are
-  added one by one after being queried;
+  recent ones, those less than `recent_seconds` older (when > 0) and those less than
+  `recent_metres` of travel behind (ground-truth path length, when > 0): a prefix of the frames
+  (`intra_session_candidate_counts`). `match_intra_session` inserts each frame into the
+  recognizers' databases just before the first query allowed to match it, so what they can
+  return and what the truth counts are one rule;
 - multi-session: every frame of the map sequence (no exclusion).
 
 A query is a *true revisit* when at least one candidate lies within `criterion_m` of it (ground
@@ -25,6 +27,12 @@ truth positions, metres). The recognizer returns the query's best candidate, at 
     precision(t) = TP / (TP + FP)   (1 by convention when there is no positive),
     recall(t)    = TP / true revisits.
 
+A vehicle standing still (at a junction, at the start) keeps seeing the frames a frame or time
+window lets through from the same spot: each of its queries is a trivial revisit. A query is
+*standing* when it has candidates under the frame and time rules alone and the newest of them is
+less than `criterion_m` of travel behind it (`standing_queries`); excluding by distance
+travelled (`recent_metres` >= `criterion_m`) leaves no such revisit.
+
 The curve is swept over every threshold at which a query changes state (just above each
 distinct finite d, plus one threshold below all of them); the sweep is one sort and two
 cumulative sums. AUC is the trapezoidal area under precision(recall) in that order, max F1 the
@@ -36,6 +44,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Literal, Protocol
@@ -75,18 +84,33 @@ class PlaceRecognitionError(RadarSlamError):
 # Ground truth
 
 
+def path_length_m(xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n,) distance travelled [m] from the first of (n, 2) positions [m] to each (0 first)."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    steps = np.hypot(*np.diff(xy, axis=0).T) if len(xy) > 1 else np.zeros(0)
+    return np.concatenate([[0.0], np.cumsum(steps)])[: len(xy)]
+
+
 def intra_session_candidate_counts(
-    times_s: NDArray[np.float64], exclusion: ExclusionConfig
+    times_s: NDArray[np.float64],
+    exclusion: ExclusionConfig,
+    travelled_m: NDArray[np.float64] | None = None,
+    recent_metres: float = 0.0,
 ) -> NDArray[np.int64]:
     """How many leading frames each query may match in intra-session evaluation.
 
-    Query i sees frames 0..i-1 minus the most recent `recent_keyframes`, and minus those newer
-    than t_i - recent_seconds when recent_seconds > 0. With increasing times this is always a
-    prefix 0..count_i - 1.
+    Query i sees frames 0..i-1 minus the most recent `recent_keyframes`, minus those newer
+    than t_i - recent_seconds when recent_seconds > 0, and minus those travelled less than
+    `recent_metres` before it (s_i - s_j < recent_metres) when recent_metres > 0. With
+    increasing times and non-decreasing path lengths this is always a prefix 0..count_i - 1, and
+    count_i never decreases with i.
 
     Args:
         times_s: (n,) frame times [s], strictly increasing.
-        exclusion: the exclusion window (as given to the recognizers).
+        exclusion: the frame and time window.
+        travelled_m: (n,) distance travelled at each frame [m] (`path_length_m`); needed when
+            recent_metres > 0.
+        recent_metres: travel [m] a candidate must lie behind the query (0 disables).
 
     Returns:
         (n,) int64 counts, count_i <= max(0, i - recent_keyframes).
@@ -98,7 +122,37 @@ def intra_session_candidate_counts(
     if exclusion.recent_seconds > 0:
         older = np.searchsorted(times, times - exclusion.recent_seconds, side="right")
         counts = np.minimum(counts, older)
+    if recent_metres > 0:
+        if travelled_m is None or np.shape(travelled_m) != times.shape:
+            raise PlaceRecognitionError("excluding by distance needs (n,) distances travelled")
+        travelled = np.asarray(travelled_m, dtype=np.float64)
+        if np.any(np.diff(travelled) < 0):
+            raise PlaceRecognitionError("distances travelled must not decrease")
+        behind = np.searchsorted(travelled, travelled - recent_metres, side="right")
+        counts = np.minimum(counts, behind)
     return counts.astype(np.int64)
+
+
+def standing_queries(
+    times_s: NDArray[np.float64],
+    exclusion: ExclusionConfig,
+    travelled_m: NDArray[np.float64],
+    criterion_m: float,
+) -> NDArray[np.bool_]:
+    """(n,) True where a query is standing: the frame and time rules of `exclusion` leave it
+    candidates, and the newest of them is less than `criterion_m` of travel behind it, so that
+    it is a revisit whatever the place recognition does.
+
+    Args:
+        times_s: (n,) frame times [s], strictly increasing.
+        exclusion: the frame and time window (its distance rule, if any, is not applied).
+        travelled_m: (n,) distance travelled at each frame [m] (`path_length_m`).
+        criterion_m: revisit radius [m].
+    """
+    travelled = np.asarray(travelled_m, dtype=np.float64)
+    counts = intra_session_candidate_counts(times_s, exclusion)
+    newest = travelled[np.maximum(counts - 1, 0)] if len(travelled) else travelled
+    return (counts > 0) & (travelled - newest < criterion_m)
 
 
 def revisit_truth(
@@ -379,8 +433,12 @@ class MethodRun:
     def add(self, index: int, frame: RadarFrame, desc: NDArray | None = None) -> None:
         """Insert a frame into the database (computing its descriptor unless given)."""
         desc = self.describe(frame) if desc is None else desc
+        self.insert(index, frame.timestamp_ns / NS_PER_S, desc)
+
+    def insert(self, index: int, time_s: float, desc: NDArray) -> None:
+        """Insert a described frame (time [s]) into the database."""
         start = time.perf_counter()
-        self.recognizer.add(desc, index, frame.timestamp_ns / NS_PER_S)
+        self.recognizer.add(desc, index, time_s)
         self.seconds += time.perf_counter() - start
 
     def query(self, index: int, frame: RadarFrame) -> NDArray[np.float32]:
@@ -446,19 +504,30 @@ def method_runs(methods: Iterable[str], cfg: RaPlaceConfig) -> list[MethodRun]:
 
 
 def match_intra_session(
-    frames: Iterable[tuple[int, RadarFrame]], runs: list[MethodRun]
+    frames: Iterable[tuple[int, RadarFrame]],
+    runs: list[MethodRun],
+    candidate_counts: NDArray[np.int64] | None = None,
 ) -> dict[str, BestMatches]:
-    """Query each frame against the earlier ones, then add it (online loop detection).
+    """Query each frame against the earlier ones (online loop detection).
 
     Args:
         frames: (index, frame) in time order; the index is the frame's position in the
-            evaluated list (what ground-truth arrays are indexed by).
-        runs: one per method; their recognizers must start empty and carry the exclusion window.
+            evaluated list (what ground-truth arrays are indexed by), 0, 1, 2, ...
+        runs: one per method; their recognizers must start empty.
+        candidate_counts: (n,) frames each query may match (`intra_session_candidate_counts`):
+            each frame then joins the databases just before the first query allowed to match
+            it, and the recognizers must exclude nothing themselves. None: each frame joins
+            right after its own query and the recognizers' exclusion windows apply.
     """
-    for index, frame in frames:
-        for run in runs:
-            desc = run.query(index, frame)
-            run.add(index, frame, desc)
+    held: deque[tuple[int, float, list[NDArray]]] = deque()
+    for seen, (index, frame) in enumerate(frames):
+        due = seen if candidate_counts is None else int(candidate_counts[index])
+        while held and held[0][0] < due:
+            key, time_s, descriptors = held.popleft()
+            for run, desc in zip(runs, descriptors, strict=True):
+                run.insert(key, time_s, desc)
+        descriptors = [run.query(index, frame) for run in runs]
+        held.append((index, frame.timestamp_ns / NS_PER_S, descriptors))
     return {run.method: run.result() for run in runs}
 
 

@@ -159,7 +159,11 @@ def doc_table(rows: list[dict[str, Any]]) -> str:
         ),
         (
             "`run --map`: ATE in the map frame, not re-aligned (<= 1.0 m)",
-            lambda r: f"{r['multisession']['ate_map_frame_m']} m",
+            lambda r: (
+                "none"
+                if r["multisession"]["ate_map_frame_m"] is None
+                else f"{r['multisession']['ate_map_frame_m']:.3f} m"
+            ),
         ),
         (
             "`run --map`: accepted inter-session loops true",

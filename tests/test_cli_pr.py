@@ -240,3 +240,41 @@ def test_unknown_config_key_is_an_error(
     code = main(["pr", "mulran/session1", "--data-root", str(data_root), "--config", str(config)])
     assert code == 1
     assert "hierachical" in capsys.readouterr().err
+
+
+STAND_FRAMES = 30
+
+
+@pytest.fixture(scope="module")
+def stand_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """mulran/stand: out along x, a stand of STAND_FRAMES frames at the far end (x = 55 m), then
+    back 3 m aside."""
+    root = tmp_path_factory.mktemp("pr_stand")
+    route = base_route(3.0)
+    half = len(route) // 2
+    stand = np.repeat(route[half - 1 : half], STAND_FRAMES, axis=0)
+    poses = np.concatenate([route[:half], stand, route[half:]])
+    write_sequence(root / "mulran" / "stand", synthetic_world(WORLD_PX, seed=11), poses, T0_NS)
+    return root
+
+
+def test_a_stand_inflates_revisits_by_frames_but_not_by_distance(
+    stand_root: Path, tmp_path: Path
+) -> None:
+    common = ("--data-root", str(stand_root), "--method", "raplace", "--criterion", "10")
+    by_frames = run_pr("mulran/stand", *common, "--exclude-recent", "8", "--out", f"{tmp_path}/f")
+    by_metres = run_pr(
+        "mulran/stand", *common, "--exclude-recent", "8", "--exclude-metres", "12",
+        "--out", str(tmp_path / "m"),
+    )  # fmt: skip
+    frames = json.loads((tmp_path / "f" / "pr.json").read_text())["raplace"]
+    metres = json.loads((tmp_path / "m" / "pr.json").read_text())["raplace"]
+    # By frames: the stand's queries 30-53 see the end of the way out (x 45-55 m) and each of
+    # the 24 frames back sees the way out. By distance only the 24 frames back are revisits.
+    # Standing: the stand's queries 31-53 (their newest candidate is 5 m behind or less) and the
+    # first two frames back (the radar, 1.5 m ahead of the base, hops 4.3 m at the turn).
+    assert frames["true_revisits"] == 48 and metres["true_revisits"] == 24
+    assert frames["standing_queries"] == metres["standing_queries"] == 25
+    assert metres["exclude_metres"] == 12.0 and "standing" in metres["standing_rule"]
+    assert "25 standing queries" in by_frames and "12 m of travel" in by_metres
+    assert metres["recall_at_1"] >= 0.9

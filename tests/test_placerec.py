@@ -20,8 +20,10 @@ from radar_slam.placerec import (
     match_queries,
     match_within_criterion,
     method_runs,
+    path_length_m,
     pr_curve,
     revisit_truth,
+    standing_queries,
     sweep_thresholds,
     with_exclusion,
 )
@@ -269,3 +271,38 @@ def test_simulated_reverse_revisits(small_reverse: RadarSequence) -> None:
     assert curves["raplace"].max_f1 >= 0.85, curves["raplace"]
     assert curves["raplace"].recall_at_1 >= 0.85
     assert curves["raplace"].max_f1 > curves["scancontext"].max_f1 + 0.15
+
+
+def stand_in_line() -> tuple[np.ndarray, np.ndarray]:
+    """(times [s], (60, 2) positions [m]): 10 frames 5 m apart along x, 40 frames standing at
+    x = 45 m, then 10 frames on, 5 m apart. A straight line: no true revisit of a place."""
+    x = np.r_[np.arange(10) * 5.0, np.full(40, 45.0), 50.0 + np.arange(10) * 5.0]
+    return np.arange(60) * 0.25, np.stack([x, np.zeros_like(x)], axis=1)
+
+
+def test_a_stand_inflates_frame_based_revisits_not_distance_based_ones() -> None:
+    times, xy = stand_in_line()
+    travelled = path_length_m(xy)
+    frames_only = ExclusionConfig(recent_keyframes=8, recent_seconds=0.0)
+    by_frames = intra_session_candidate_counts(times, frames_only)
+    by_metres = intra_session_candidate_counts(times, frames_only, travelled, recent_metres=12.0)
+    # Frames: stand queries 16-49 reach frames 7-9 (x 35-45 m) and frames 50, 51 the stand.
+    assert revisit_truth(xy, xy, by_frames, 10.0).sum() == 36
+    assert revisit_truth(xy, xy, by_metres, 10.0).sum() == 0
+    standing = standing_queries(times, frames_only, travelled, 10.0)
+    np.testing.assert_array_equal(np.flatnonzero(standing), np.r_[np.arange(17, 50), 50])
+
+
+def test_distance_counts_agree_with_held_back_insertion() -> None:
+    times, xy = stand_in_line()
+    travelled = path_length_m(xy)
+    np.testing.assert_allclose(travelled[[0, 9, 49, 59]], [0.0, 45.0, 45.0, 95.0])
+    counts = intra_session_candidate_counts(
+        times, ExclusionConfig(2, 0.0), travelled, recent_metres=7.0
+    )
+    assert np.all(np.diff(counts) >= 0)
+    for i, count in enumerate(counts):
+        assert np.all(travelled[i] - travelled[:count] >= 7.0)
+        assert count == 0 or count >= i - 2 or travelled[i] - travelled[count] < 7.0
+    with pytest.raises(PlaceRecognitionError, match="distances travelled"):
+        intra_session_candidate_counts(times, ExclusionConfig(0, 0.0), None, 5.0)

@@ -31,6 +31,7 @@ from tqdm import tqdm
 from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.config import merge, read_yaml, write_yaml
 from radar_slam.datasets import RadarFrame, RadarSequence, open_sequence
+from radar_slam.loops.recent import NO_EXCLUSION
 from radar_slam.placerec import (
     DEFAULT_CRITERION_M,
     DEFAULT_EXCLUDE_RECENT,
@@ -46,6 +47,8 @@ from radar_slam.placerec import (
     match_intra_session,
     match_queries,
     method_runs,
+    path_length_m,
+    standing_queries,
     with_exclusion,
 )
 from radar_slam.plots import plot_pr_curves
@@ -227,6 +230,11 @@ def warn_overridden_exclusion(cfg: RaPlaceConfig, exclusion: ExclusionConfig) ->
             )
 
 
+STANDING_RULE = (
+    "a query is standing when the frame and time rules leave it candidates and the newest is "
+    "less than criterion_m of ground-truth travel behind it"
+)
+
 MAX_OPTION_VALUE = 1e9
 """Upper bound of the distance [m] and time [s] options (rejects inf, which JSON cannot hold)."""
 
@@ -262,6 +270,16 @@ def pr_command(
         max=MAX_OPTION_VALUE,
         help="Intra-session: frames less than this many seconds older are excluded too.",
     ),
+    exclude_metres: float = typer.Option(
+        0.0,
+        "--exclude-metres",
+        min=0.0,
+        max=MAX_OPTION_VALUE,
+        help="Intra-session: frames less than this distance travelled before the query "
+        "(ground-truth path length) \\[m] are excluded too. A query is counted as standing when "
+        "the frame and time rules leave it a candidate less than the criterion of travel "
+        "behind (a trivial revisit); pr.json reports how many.",
+    ),
     out: Path | None = typer.Option(
         None, "--out", help="Output folder (absent or empty); default results/pr_<seq>/<time>/."
     ),
@@ -286,7 +304,9 @@ def pr_command(
     if config_path is not None:
         warn_overridden_exclusion(cfg, exclusion)
     cfg = with_exclusion(cfg, exclusion)
-    evaluation = run_evaluation(query, reference, method.methods(), cfg, criterion_m)
+    evaluation = run_evaluation(
+        query, reference, method.methods(), cfg, criterion_m, exclude_metres
+    )
     folder = write_result_dir(
         RESULTS_FAMILY, evaluation.folder_name, lambda f: write_results(f, evaluation, cfg), out
     )
@@ -303,9 +323,11 @@ class Evaluation:
         query: the query frames; map_frames: the frames matched against (the same in
             intra-session mode).
         mode: "intra" or "multi".
-        exclusion: the exclusion window used by the recognizers and the truth.
+        exclusion: the frame and time window used by the recognizers and the truth.
         criterion_m: revisit criterion [m].
         matches: each method's best candidates; curves: each method's PR curve.
+        exclude_metres: the distance window [m] (intra-session; 0 none).
+        standing: intra-session queries counted as standing (`radar_slam.placerec`).
     """
 
     query: EvaluatedFrames
@@ -315,6 +337,8 @@ class Evaluation:
     criterion_m: float
     matches: dict[str, BestMatches]
     curves: dict[str, PRCurve]
+    exclude_metres: float = 0.0
+    standing: int = 0
 
     @property
     def folder_name(self) -> str:
@@ -339,6 +363,9 @@ class Evaluation:
             text += f", {self.exclusion.recent_keyframes} most recent frames excluded"
             if self.exclusion.recent_seconds > 0:
                 text += f" and those within {self.exclusion.recent_seconds:g} s"
+            if self.exclude_metres > 0:
+                text += f" and those within {self.exclude_metres:g} m of travel"
+            text += f"; {self.standing} standing queries"
         return text
 
     def settings(self) -> dict[str, object]:
@@ -350,6 +377,9 @@ class Evaluation:
             "criterion_m": self.criterion_m,
             "exclude_recent": self.exclusion.recent_keyframes,
             "exclude_seconds": self.exclusion.recent_seconds,
+            "exclude_metres": self.exclude_metres,
+            "standing_queries": self.standing,
+            "standing_rule": STANDING_RULE,
         }
 
 
@@ -359,23 +389,30 @@ def run_evaluation(
     methods: tuple[str, ...],
     cfg: RaPlaceConfig,
     criterion_m: float,
+    exclude_metres: float = 0.0,
 ) -> Evaluation:
     """Run the recognizers over the frames and evaluate them.
 
-    Intra-session when `reference` is None (each query against earlier frames outside the
-    exclusion window of `cfg`); otherwise every frame of `reference` is inserted first and the
-    queries are matched against all of it.
+    Intra-session when `reference` is None: each query against the earlier frames outside the
+    exclusion window of `cfg` and, when `exclude_metres` > 0, at least that much ground-truth
+    travel behind it. Otherwise every frame of `reference` is inserted first and the queries
+    are matched against all of it.
     """
-    runs = method_runs(methods, cfg)
     label = spec_name(query.sequence)
     exclusion = cfg.retrieval.exclusion
     mode: Mode
+    standing = 0
     if reference is None:
-        matches = match_intra_session(query.frames(f"pr {label}"), runs)
         times_s = query.timestamps_ns.astype(np.float64) / NS_PER_S
-        counts = intra_session_candidate_counts(times_s, exclusion)
+        travelled = path_length_m(query.xy)
+        counts = intra_session_candidate_counts(times_s, exclusion, travelled, exclude_metres)
+        standing = int(standing_queries(times_s, exclusion, travelled, criterion_m).sum())
+        runs = method_runs(methods, with_exclusion(cfg, NO_EXCLUSION))
+        matches = match_intra_session(query.frames(f"pr {label}"), runs, counts)
         map_frames, mode = query, "intra"
     else:
+        exclude_metres = 0.0  # every map frame is a candidate
+        runs = method_runs(methods, cfg)
         build_map(reference.frames(f"map {spec_name(reference.sequence)}"), runs)
         matches = match_queries(query.frames(f"query {label}"), runs)
         counts = np.full(len(query), len(reference), dtype=np.int64)
@@ -384,7 +421,9 @@ def run_evaluation(
         m: evaluate_matches(matches[m], query.xy, map_frames.xy, counts, criterion_m)
         for m in methods
     }
-    return Evaluation(query, map_frames, mode, exclusion, criterion_m, matches, curves)
+    return Evaluation(
+        query, map_frames, mode, exclusion, criterion_m, matches, curves, exclude_metres, standing
+    )
 
 
 def write_results(folder: Path, evaluation: Evaluation, cfg: RaPlaceConfig) -> None:

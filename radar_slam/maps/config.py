@@ -15,15 +15,17 @@ class LocalizerConfig:
     Attributes:
         candidates: RaPlace candidates verified per global relocalisation attempt.
         max_descriptor_distance: candidates at or above this RaPlace distance are not verified.
-        relocalise_every_m: while lost, a global attempt after this much travel [m] (0: every
-            scan).
-        confirm_max_error_m: a global fix is only believed once a second one, this much travel
-            later or more, agrees with it through the odometry within this distance [m] ...
+        relocalise_every_m: while lost with no hypothesis held, a global attempt after this much
+            travel [m] (0: every scan); once one is held, every scan is an attempt.
+        confirm_max_error_m: a global fix is only believed once further hypotheses agree, each
+            with the previous one carried forward by the odometry, within this distance [m]
+            (from how many keyframes: `radar_slam.maps.localizer.CONFIRM_KEYFRAMES`) ...
         confirm_max_error_deg: ... and this rotation [deg].
         fix_every_m: while tracking, a map fix is attempted after this much travel [m].
         search_radius_m: tracking fixes use the map keyframes within this distance of the
             predicted pose [m], nearest first.
-        fix_keyframes: at most this many keyframes are tried per tracking fix.
+        fix_keyframes: at most this many keyframes are tried per tracking fix (and per
+            attempt to complete a relocalisation's agreeing hypotheses with one).
         max_innovation_m: a tracking fix farther than this from the prediction is refused [m] ...
         max_innovation_deg: ... or turned more than this from it [deg].
         lost_after_m: tracking without a successful fix for this much travel is lost [m].
@@ -32,7 +34,7 @@ class LocalizerConfig:
         map_sigma_yaw_deg: the same for their rotation [deg].
     """
 
-    candidates: int = 2
+    candidates: int = 3
     max_descriptor_distance: float = 0.25
     relocalise_every_m: float = 4.0
     confirm_max_error_m: float = 1.5

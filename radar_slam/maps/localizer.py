@@ -5,10 +5,15 @@
 - **lost -> relocalised.** Every `relocalise_every_m` of travel the scan's RaPlace descriptor is
   looked up in the whole map (no exclusion window) and the best candidates are verified as loops
   are (`radar_slam.loops.GeometricVerifier`, both pi hypotheses of the rotation, against the
-  keyframe's stored image made back into a scan). A verified match gives a pose hypothesis
-  T_map_scan = T_map_keyframe * z^-1; it is only believed once a second hypothesis, at least
-  `relocalise_every_m` later, agrees with the first carried forward by the odometry
-  (`confirm_max_error_m/_deg`): a single wrong match never places the vehicle.
+  keyframe's stored image made back into a scan); each that verifies gives a pose hypothesis
+  T_map_scan = T_map_keyframe * z^-1, best registration quality first. Hypotheses are only
+  believed once they make a chain (attempted at every scan once one is held), each agreeing with
+  the previous one carried forward by the odometry (`confirm_max_error_m/_deg`), from
+  `CONFIRM_KEYFRAMES` distinct keyframes over `CONFIRM_SCANS` scans or more: the keyframes' own
+  map poses must then agree with each other and with the path driven, which a wrong match, or a
+  run of them on a repetitive street, rarely does. The last keyframe may come from a tracking
+  fix (below) against the keyframes nearest the chain's pose: entering the map's route, the
+  vehicle matches the first keyframes long before a third is among the global candidates.
 - **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is registered by
   phase correlation (`odometry.registration`, the loop verifier's refinement stage, with the
   predicted relative yaw in place of its sinogram stage) against the nearest map keyframes to
@@ -17,8 +22,15 @@
   scans of the latest `window_fixes` fixes joined by the odometry between them, each fix a loop
   factor (robust kernel) to its keyframe, the keyframes held by tight priors at their map poses.
   The fused pose of the newest scan is the new anchor of the prediction.
-- **lost.** After `lost_after_m` of travel without an accepted fix, tracking has lost the map:
-  back to global relocalisation.
+- **lost.** Once `FAILED_FIXES_LOST` tracking fixes in a row have failed, the registration to
+  the map has weakened: the scans are reported lost (the odometry still carries the prediction,
+  and a fix that agrees with it resumes tracking). After `lost_after_m` of travel without an
+  accepted fix, tracking has lost the map: back to global relocalisation.
+
+Each localised scan comes with the covariance of its pose (`Localization.covariance`): the
+latest fix's registration and map keyframe uncertainty, carried forward through the odometry's
+covariance since. `Localization.relative` is the pose relative to that fix's map keyframe, the
+form of the Boreas localisation benchmark.
 """
 
 from __future__ import annotations
@@ -51,7 +63,7 @@ from radar_slam.maps.images import ImageGeometry, KeyframeImager
 from raplace.config import DescriptorConfig, ExclusionConfig
 from raplace.descriptor import DescriptorExtractor
 from raplace.retrieval import PlaceRecognizer
-from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
+from raplace.se2 import adjoint, between, compose, inverse, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
 if TYPE_CHECKING:
@@ -66,6 +78,18 @@ MAP_KEY_BASE = 1 << 40
 IMAGE_CACHE_SIZE = 64
 """Map keyframes kept as ready-made scans."""
 _WINDOW_GRAPH = GraphConfig(final_pass="lm")
+CONFIRM_KEYFRAMES = 3
+"""Distinct map keyframes a chain of agreeing global hypotheses must come from before a fix is
+believed: matches to one keyframe agree with each other whatever its map pose, and two
+neighbouring keyframes of a wrong street, repeated facades for instance, can agree with each
+other and with a short drive; a third rarely does (`Localizer._complete_chain`)."""
+CONFIRM_SCANS = 2
+"""Scans the chain must span: the odometry between them checks the keyframes' relative poses
+against the path driven, which one scan's matches alone cannot."""
+FAILED_FIXES_LOST = 2
+"""Tracking fix attempts failing in a row after which the scans are reported lost: one can fail
+on a passing truck; two in a row mean the map no longer supports the pose, which is then only
+the odometry's extrapolation."""
 
 
 @dataclass(frozen=True)
@@ -77,7 +101,13 @@ class Localization:
         status: "relocalised" (placed by global relocalisation now), "tracked" or "lost".
         pose: (3,) T_map_radar (x, y [m], yaw [rad]); NaN when lost.
         map_key: index of the map keyframe of the latest accepted fix (-1 when lost).
-        quality: phase-correlation peak-to-noise ratio of that fix (0 when lost).
+        quality: peak-to-noise ratio of that fix's phase-correlation registration to the map
+            (dimensionless, 0 when lost); no fix is accepted below
+            `loop_closure.verification.min_refined_quality`, and higher is a sharper match.
+        relative: (3,) the pose relative to the map keyframe `map_key`, T_keyframe_radar
+            (x, y [m], yaw [rad]); NaN when lost.
+        covariance: (3, 3) covariance of the pose (and of `relative`) in the radar's own frame,
+            GTSAM's right perturbation (x, y [m], yaw [rad]); NaN when lost.
     """
 
     timestamp_ns: int
@@ -85,6 +115,15 @@ class Localization:
     pose: FloatArray
     map_key: int
     quality: float
+    relative: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
+    covariance: FloatArray = field(default_factory=lambda: np.full((3, 3), np.nan))
+
+    @property
+    def sigma_m(self) -> float:
+        """Standard deviation of the position along its least certain axis [m] (NaN when lost)."""
+        if not self.localised:
+            return float("nan")
+        return float(np.sqrt(max(0.0, float(np.linalg.eigvalsh(self.covariance[:2, :2])[-1]))))
 
     @property
     def localised(self) -> bool:
@@ -120,14 +159,21 @@ class _State:
     anchor: FloatArray = field(default_factory=lambda: np.zeros(3))  # T_map_anchor_scan
     since: FloatArray = field(default_factory=lambda: np.zeros(3))  # T_anchor_scan
     since_cov: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
+    pose_cov: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))  # radar frame
     path_since_fix_m: float = 0.0
     path_since_attempt_m: float = np.inf
-    pending: _Fix | None = None
+    failed_fixes: int = 0
+    chain: list[tuple[_Fix, FloatArray, FloatArray]] = field(default_factory=list)
     pending_since: FloatArray = field(default_factory=lambda: np.zeros(3))
     pending_cov: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
     pending_path_m: float = 0.0
     window: list[_Node] = field(default_factory=list)
     last_fix: _Fix | None = None
+
+
+def symmetric(matrix: FloatArray) -> FloatArray:
+    """The symmetric part of a square matrix (covariances stay exactly symmetric)."""
+    return 0.5 * (matrix + matrix.T)
 
 
 def descriptor_config_of(m: Map, fallback: DescriptorConfig) -> DescriptorConfig:
@@ -251,7 +297,10 @@ class Localizer:
         fix = state.last_fix
         assert fix is not None
         pose = compose(state.anchor, state.since)
-        return Localization(result.timestamp_ns, status, pose, fix.keyframe, fix.quality)
+        relative = between(self.keyframes.poses[fix.keyframe], pose)
+        return Localization(
+            result.timestamp_ns, status, pose, fix.keyframe, fix.quality, relative, state.pose_cov
+        )
 
     # -- odometry bookkeeping ---------------------------------------------------------------
     def _twist(self, result: OdometryResult) -> FloatArray | None:
@@ -269,6 +318,8 @@ class Localizer:
         step = float(np.hypot(motion[0], motion[1]))
         step_cov = rotate_covariance(result.covariance, -float(motion[2]))
         state.since_cov = rotate_covariance(state.since_cov, -float(motion[2])) + step_cov
+        carry = adjoint(inverse(motion))
+        state.pose_cov = symmetric(carry @ state.pose_cov @ carry.T + step_cov)
         state.pending_cov = rotate_covariance(state.pending_cov, -float(motion[2])) + step_cov
         state.since = compose(state.since, motion)
         state.pending_since = compose(state.pending_since, motion)
@@ -279,10 +330,10 @@ class Localizer:
     # -- global relocalisation --------------------------------------------------------------
     def _relocalise(self, query: KeyScan) -> bool:
         cfg, state = self.cfg, self.state
-        if state.pending is not None and state.pending_path_m > cfg.lost_after_m:
-            state.pending = None
-        if state.path_since_attempt_m < cfg.relocalise_every_m:
-            return False
+        if state.chain and state.pending_path_m > cfg.lost_after_m:
+            state.chain = []
+        if not state.chain and state.path_since_attempt_m < cfg.relocalise_every_m:
+            return False  # while a chain is open, every scan may add to it
         state.path_since_attempt_m = 0.0
         self.global_attempts += 1
         s = query.scan
@@ -292,37 +343,81 @@ class Localizer:
             for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)
             if c.distance < cfg.max_descriptor_distance
         ]
-        fix = self._first_verified(query, candidates)
-        if fix is None:
+        for fix in self._verified(query, candidates):
+            self._extend_chain(fix)
+        keyframes, scans = self._chain_span()
+        if len(keyframes) == CONFIRM_KEYFRAMES - 1 and len(scans) >= CONFIRM_SCANS:
+            self._complete_chain(query, keyframes)
+            keyframes, scans = self._chain_span()
+        if len(keyframes) < CONFIRM_KEYFRAMES or len(scans) < CONFIRM_SCANS:
             return False
-        pending = state.pending
-        if pending is None or state.pending_path_m < cfg.relocalise_every_m:
-            if pending is None:
-                self._hold(fix)
-            return False
-        carried = compose(pending.pose, state.pending_since)
-        if not self._agrees(carried, fix.pose, cfg.confirm_max_error_m, cfg.confirm_max_error_deg):
-            self._hold(fix)  # the newer hypothesis replaces the older
-            return False
-        self._start_tracking(pending, fix)
+        self._start_tracking()
         self.relocalisations += 1
         return True
 
-    def _hold(self, fix: _Fix) -> None:
+    def _chain_span(self) -> tuple[set[int], set[int]]:
+        """The distinct map keyframes and scans of the chain's hypotheses."""
+        chain = self.state.chain
+        return {f.keyframe for f, _, _ in chain}, {f.scan for f, _, _ in chain}
+
+    def _complete_chain(self, query: KeyScan, keyframes: set[int]) -> None:
+        """A chain one keyframe short of `CONFIRM_KEYFRAMES` may take its last one from a
+        tracking fix: the scan registered, as while tracking, against the map keyframes nearest
+        the chain's pose that are not in it, `fix_keyframes` of them whatever their distance
+        (a vehicle entering the map's route sees the keyframes beyond the two it matched from
+        farther than `search_radius_m`; one too far to share its view fails the registration or
+        the innovation gate). A fix that does not agree with the chain is dropped: it comes from
+        the chain's own prediction, so it never starts one."""
         state = self.state
-        state.pending = fix
+        predicted = compose(state.chain[-1][0].pose, state.pending_since)
+        nearest = self.keyframes.near(predicted, np.inf, self.cfg.fix_keyframes + len(keyframes))
+        for kf in [k for k in nearest if k not in keyframes][: self.cfg.fix_keyframes]:
+            fix = self._tracking_fix(query, kf, predicted)
+            if fix is not None and self._joins_chain(fix):
+                return
+
+    def _extend_chain(self, fix: _Fix) -> None:
+        """Add a hypothesis to the chain when it agrees with it; else it starts a new chain
+        (unless it is a weaker one of the same scan)."""
+        chain = self.state.chain
+        if self._joins_chain(fix) or (chain and chain[-1][0].scan == fix.scan):
+            return
+        self._hold(fix)
+
+    def _joins_chain(self, fix: _Fix) -> bool:
+        """Append `fix` to the chain if it agrees with the latest hypothesis carried forward by
+        the odometry (`confirm_max_error_m/_deg`)."""
+        cfg, state = self.cfg, self.state
+        if not state.chain:
+            return False
+        carried = compose(state.chain[-1][0].pose, state.pending_since)
+        if not self._agrees(carried, fix.pose, cfg.confirm_max_error_m, cfg.confirm_max_error_deg):
+            return False
+        state.chain.append((fix, state.pending_since.copy(), state.pending_cov.copy()))
+        self._restart_pending()
+        return True
+
+    def _hold(self, fix: _Fix) -> None:
+        """Start a chain of agreeing hypotheses with `fix`."""
+        self.state.chain = [(fix, np.zeros(3), np.zeros((3, 3)))]
+        self._restart_pending()
+
+    def _restart_pending(self) -> None:
+        state = self.state
         state.pending_since = np.zeros(3)
         state.pending_cov = np.zeros((3, 3))
         state.pending_path_m = 0.0
 
-    def _start_tracking(self, first: _Fix, second: _Fix) -> None:
+    def _start_tracking(self) -> None:
+        """Track from the agreeing chain: its fixes, joined by the odometry, fill the window."""
         state = self.state
-        motion, covariance = state.pending_since, state.pending_cov
-        first_node = _Node(first.scan, np.zeros(3), np.zeros((3, 3)), first, first.pose)
-        state.window = [first_node]
-        state.pending = None
+        chain, state.chain = state.chain, []
+        state.window = []
         state.tracking = True
-        self._add_node(second, motion, covariance)
+        state.failed_fixes = 0
+        for fix, motion, covariance in chain:
+            if not state.window or fix.scan != state.window[-1].scan:  # one fix per scan
+                self._add_node(fix, motion, covariance)
 
     # -- tracking -----------------------------------------------------------------------------
     def _track(self, query: KeyScan) -> Status:
@@ -337,13 +432,16 @@ class Localizer:
             )
             if fix is not None:
                 self._add_node(fix, state.since, state.since_cov)
+                state.failed_fixes = 0
+            else:
+                state.failed_fixes += 1
         if state.path_since_fix_m > cfg.lost_after_m:
             log.info("scan %d: no map fix for %.0f m: lost", query.key, state.path_since_fix_m)
             state.tracking = False
             state.window = []
             state.path_since_attempt_m = np.inf
             return "lost"
-        return "tracked"
+        return "lost" if state.failed_fixes >= FAILED_FIXES_LOST else "tracked"
 
     def _add_node(self, fix: _Fix, motion: FloatArray, covariance: FloatArray) -> None:
         """Append the fix's scan to the window, re-solve it, re-anchor the prediction."""
@@ -358,16 +456,14 @@ class Localizer:
         state.anchor = fused
         state.since = np.zeros(3)
         state.since_cov = np.zeros((3, 3))
+        state.pose_cov = self._fix_covariance(fix)
         state.path_since_fix_m = 0.0
         state.last_fix = fix
 
     def _solve_window(self) -> FloatArray:
         """The window graph's estimate of the newest node (T_map_scan)."""
-        cfg = self.cfg
         graph = PoseGraph(_WINDOW_GRAPH)
-        prior = np.diag(
-            [cfg.map_sigma_xy_m**2, cfg.map_sigma_xy_m**2, np.deg2rad(cfg.map_sigma_yaw_deg) ** 2]
-        )
+        prior = self._map_prior()
         added: set[int] = set()
         previous: _Node | None = None
         for node in self.state.window:
@@ -412,17 +508,32 @@ class Localizer:
         )
         return _Fix(query.key, kf, measurement, covariance, float(estimate.quality), pose)
 
-    def _first_verified(self, query: KeyScan, keyframes: list[int]) -> _Fix | None:
-        """The first keyframe that verifies as a loop does."""
+    def _verified(self, query: KeyScan, keyframes: list[int]) -> list[_Fix]:
+        """The keyframes that verify as a loop does, as fixes, highest registration quality
+        first."""
+        fixes: list[_Fix] = []
         for kf in keyframes:
             result: Verification = self.verifier(query, self.keyframes.scan(kf))
-            if not result.ok:
-                continue
-            pose = compose(self.keyframes.poses[kf], inverse(result.measurement))
-            return _Fix(
-                query.key, kf, result.measurement, result.covariance, result.refined_quality, pose
-            )
-        return None
+            if result.ok:
+                pose = compose(self.keyframes.poses[kf], inverse(result.measurement))
+                fixes.append(
+                    _Fix(query.key, kf, result.measurement, result.covariance,
+                         result.refined_quality, pose)
+                )  # fmt: skip
+        return sorted(fixes, key=lambda f: -f.quality)
+
+    def _fix_covariance(self, fix: _Fix) -> FloatArray:
+        """(3, 3) covariance of the pose a fix gives, in the scan's frame: the measurement's and
+        the keyframe's (its window prior), carried through T_map_scan = T_map_keyframe * z^-1."""
+        carry = adjoint(fix.measurement)
+        return symmetric(carry @ (fix.covariance + self._map_prior()) @ carry.T)
+
+    def _map_prior(self) -> FloatArray:
+        """(3, 3) covariance of a map keyframe's pose (its prior in the window graph)."""
+        cfg = self.cfg
+        return np.diag(
+            [cfg.map_sigma_xy_m**2, cfg.map_sigma_xy_m**2, np.deg2rad(cfg.map_sigma_yaw_deg) ** 2]
+        )
 
     @staticmethod
     def _agrees(a: FloatArray, b: FloatArray, max_m: float, max_deg: float) -> bool:

@@ -35,10 +35,19 @@ from radar_slam.trajectory import Trajectory, write_tum
 
 log = logging.getLogger(__name__)
 
-LOCALIZATION_CSV_COLUMNS = ("scan_ns", "status", "map_key", "x", "y", "yaw", "quality")
-"""localization.csv header: scan time [ns], relocalised / tracked / lost, map keyframe index of
-the latest fix (-1 when lost), pose T_map_radar (x, y [m], yaw [rad], empty when lost), fix
-quality (phase-correlation peak-to-noise ratio, 0 when lost)."""
+LOCALIZATION_CSV_COLUMNS = (
+    "scan_ns", "status", "map_key", "x", "y", "yaw", "quality", "sigma_m",
+    "rel_x", "rel_y", "rel_yaw", "cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw",
+)  # fmt: skip
+"""localization.csv header: scan time [ns]; relocalised / tracked / lost; the map keyframe index
+of the latest fix (-1 when lost); the pose T_map_radar (x, y [m], yaw [rad]); quality: the
+peak-to-noise ratio of that fix's registration to the map (dimensionless, never below
+`loop_closure.verification.min_refined_quality`, higher is sharper); sigma_m: the standard
+deviation of the position along its least certain axis [m], which grows with the travel since
+the fix (threshold it for a position tolerance); the pose relative to the map keyframe,
+T_keyframe_radar (rel_x, rel_y [m], rel_yaw [rad]: the Boreas localisation benchmark's form);
+and the upper triangle of its 3x3 covariance in the radar frame (x, y [m], yaw [rad]). Every
+column after status is empty when lost, but map_key (-1) and quality (0)."""
 TUM_FILE = "localization.tum"
 CSV_FILE = "localization.csv"
 PLOT_FILE = "localization.png"
@@ -63,8 +72,22 @@ def write_localization_csv(path: Path, fixes: Sequence[Localization]) -> None:
         writer = csv.writer(stream)
         writer.writerow(LOCALIZATION_CSV_COLUMNS)
         for f in fixes:
-            pose = [repr(float(v)) for v in f.pose] if f.localised else ["", "", ""]
-            writer.writerow([f.timestamp_ns, f.status, f.map_key, *pose, f"{f.quality:.2f}"])
+            writer.writerow(
+                [f.timestamp_ns, f.status, f.map_key, *_pose_cells(f), f"{f.quality:.2f}"]
+                + _uncertainty_cells(f)
+            )
+
+
+def _pose_cells(f: Localization) -> list[str]:
+    return [repr(float(v)) for v in f.pose] if f.localised else ["", "", ""]
+
+
+def _uncertainty_cells(f: Localization) -> list[str]:
+    """sigma_m, the relative pose and the covariance's upper triangle (empty when lost)."""
+    if not f.localised:
+        return [""] * (len(LOCALIZATION_CSV_COLUMNS) - 7)
+    upper = f.covariance[np.triu_indices(3)]
+    return [f"{f.sigma_m:.3g}", *(repr(float(v)) for v in f.relative), *(f"{v:.6g}" for v in upper)]
 
 
 def plot_localization(path: Path, m: Map, fixes: Sequence[Localization], title: str) -> None:

@@ -6,7 +6,7 @@ peak quality is highest where the scan's de-skew matches the reference image's: 
 sweep's yaw rate relative to the reference's de-skew, not the true one, which is what a
 registration of the two images needs. The odometry searches a scan whose peak collapsed
 (`deskew_choice.weak_searched`); `radar_slam.loops.verification` a loop query's yaw rate at low
-frame rates.
+frame rates (`searched_registration`).
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.registration import MotionEstimate, PreparedScan
+from odometry.registration import MotionEstimate, PreparedScan, register
 from odometry.velocity import bounded_twist
+from raplace.se2 import inverse
 
 FloatArray = NDArray[np.float64]
 Register = Callable[..., MotionEstimate]
@@ -74,6 +75,36 @@ def searched(
     if found.quality <= (1.0 + MIN_GAIN) * estimate.quality:
         return scan, estimate
     return found_scan, found
+
+
+def searched_registration(
+    query: PreparedScan,
+    match: PreparedScan,
+    estimate: MotionEstimate,
+    cfg: OdometryConfig,
+    twist_span_s: float | None,
+) -> MotionEstimate:
+    """`estimate`, the registration of `match` against `query` (`registration.register(query,
+    match, cfg)`), or the registration with `query` de-skewed at a searched yaw rate when that
+    correlates more strongly (`searched`). Only for a query de-skewed with a twist interpolated
+    over `twist_span_s` [s] of at least `LOW_RATE_INTERVAL_S` and a valid `estimate`. The search
+    registers the query variants against the match; the result is registered again the usual
+    way round, seeded with `estimate`."""
+    if (
+        query.twist is None
+        or twist_span_s is None
+        or twist_span_s < LOW_RATE_INTERVAL_S
+        or not estimate.ok
+    ):
+        return estimate
+    swapped = register(match, query, cfg, inverse(estimate.motion))
+    if not swapped.ok:
+        return estimate
+    found, _ = searched(match, query, swapped, cfg, register)
+    if found is query:
+        return estimate
+    again = register(found, match, cfg, estimate.motion)
+    return again if again.ok and again.quality > estimate.quality else estimate
 
 
 def _search_round(

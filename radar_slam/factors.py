@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from radar_slam.errors import GraphError
 from radar_slam.loops.records import LoopConstraint
-from raplace import se2
+from raplace import adjoint, between, inverse
 
 FloatArray = NDArray[np.float64]
 LoopKernel = Literal["cauchy", "huber", "none"]
@@ -141,7 +141,7 @@ def relative_pose_covariance(
     The joint covariance is GTSAM's (blocks i then j, each in its own body frame); the result is in
     the frame of the relative pose. Jacobians of `between`: d/di = -Ad((T_i^-1 T_j)^-1), d/dj = I.
     """
-    rel = se2.between(pose_i, pose_j)
-    h = np.hstack([-se2.adjoint(se2.inverse(rel)), np.eye(POSE_DIM)])
+    rel = between(pose_i, pose_j)
+    h = np.hstack([-adjoint(inverse(rel)), np.eye(POSE_DIM)])
     cov = h @ np.asarray(joint_covariance, dtype=np.float64) @ h.T
     return 0.5 * (cov + cov.T)

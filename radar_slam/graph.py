@@ -3,7 +3,7 @@
 Conventions (the whole project's):
 - A pose is a (3,) float array `(x [m], y [m], yaw [rad])`, T_world_keyframe.
 - A relative measurement between keyframes i and j is the pose of j in the frame of i,
-  `T_i^-1 T_j` (`raplace.se2.between(T_i, T_j)`), exactly what `gtsam.BetweenFactorPose2(i, j)`
+  `T_i^-1 T_j` (`raplace.between(T_i, T_j)`), exactly what `gtsam.BetweenFactorPose2(i, j)`
   expects.
 - A covariance is (3, 3) in GTSAM's Pose2 tangent space, order `(x [m], y [m], yaw [rad])`,
   expressed in the frame of the measurement itself (right perturbation: `z * Exp(delta)`). It
@@ -48,7 +48,7 @@ from radar_slam.factors import (
     relative_pose_covariance,
 )
 from radar_slam.loops.records import LoopConstraint
-from raplace import checks, se2
+from raplace import between, checks, compose, wrap_angle
 
 log = logging.getLogger(__name__)
 
@@ -558,7 +558,7 @@ class PoseGraph:
     def predict(self, key: int, measurement: ArrayLike) -> FloatArray:
         """(3,) estimate(key) composed with a relative `measurement` (3,): an initial guess for a
         new keyframe seen from `key`."""
-        return se2.compose(self.estimate(key), as_pose(measurement, "predict measurement"))
+        return compose(self.estimate(key), as_pose(measurement, "predict measurement"))
 
     def residual_chi2(self, constraint_id: int) -> float:
         """Squared Mahalanobis distance of a factor's measurement from the latest estimates of
@@ -566,8 +566,8 @@ class PoseGraph:
         if not 0 <= constraint_id < len(self._constraints):
             raise GraphError(f"no constraint with id {constraint_id}")
         c = self._constraints[constraint_id]
-        error = se2.between(c.measurement, se2.between(self.estimate(c.i), self.estimate(c.j)))
-        error[2] = se2.wrap_angle(error[2])
+        error = between(c.measurement, between(self.estimate(c.i), self.estimate(c.j)))
+        error[2] = wrap_angle(error[2])
         return float(error @ np.linalg.solve(c.covariance, error))
 
     def priors(self) -> list[Prior]:

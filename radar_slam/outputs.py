@@ -40,7 +40,7 @@ from radar_slam.loops import LoopDecision
 from radar_slam.pipeline.records import OdometryRun, Results
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory, write_kitti, write_tum
-from raplace.se2 import compose
+from raplace import compose
 
 log = logging.getLogger(__name__)
 

@@ -54,11 +54,16 @@ from numpy.typing import NDArray
 
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.errors import RadarSlamError
-from raplace.config import ExclusionConfig, RaPlaceConfig
-from raplace.descriptor import DescriptorExtractor
-from raplace.retrieval import PlaceRecognizer, Recognizer
-from raplace.scancontext import ScanContextExtractor, ScanContextRecognizer
-from raplace.units import NS_PER_S
+from raplace import (
+    NS_PER_S,
+    DescriptorExtractor,
+    ExclusionConfig,
+    PlaceRecognizer,
+    RaPlaceConfig,
+    Recognizer,
+    ScanContextExtractor,
+    ScanContextRecognizer,
+)
 
 log = logging.getLogger(__name__)
 

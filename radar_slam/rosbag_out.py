@@ -47,7 +47,7 @@ from radar_slam.datasets.rosbag import IMAGE_TYPE, ROS1_SUFFIX, SCAN_INFO_TOPIC
 from radar_slam.errors import ResultsError
 from radar_slam.results import remove_stale_partials
 from radar_slam.trajectory import Trajectory, quaternion_from_yaw
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S
 
 logger = logging.getLogger(__name__)
 

@@ -23,8 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radar_slam.errors import TrajectoryError
-from raplace.se2 import accumulate, relative_motions, wrap_angle
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, accumulate, relative_motions, wrap_angle
 
 logger = logging.getLogger(__name__)
 

@@ -39,8 +39,7 @@ from numpy.typing import NDArray
 
 from radar_slam.errors import RadarSlamError
 from radar_slam.results import PARTIAL_SUFFIX, remove_stale_partials
-from raplace.se2 import compose, inverse
-from raplace.warp import CartesianGrid, CartesianWarper
+from raplace import CartesianGrid, CartesianWarper, compose, inverse
 
 if TYPE_CHECKING:
     from odometry import OdometryResult

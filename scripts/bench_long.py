@@ -59,8 +59,7 @@ from bench_raplace import DATABASE_NOISE, median_ms, pin_to_one_core
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from odometry import OdometryConfig
-from odometry.registration import prepare, register
+from odometry import OdometryConfig, prepare, register
 from radar_slam.datasets import open_sequence, registry
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.g2o import write_pose_graph
@@ -69,11 +68,8 @@ from radar_slam.loops.verification import GeometricVerifier
 from radar_slam.pipeline import Pipeline, Progress, Results, load_config
 from radar_slam.sim.family import is_complete
 from radar_slam.sim.scenarios import SCENARIOS
-from raplace.config import RetrievalConfig
+from raplace import NS_PER_S, PlaceRecognizer, RetrievalConfig, between
 from raplace.descriptor import DescriptorExtractor, z_normalise
-from raplace.retrieval import PlaceRecognizer
-from raplace.se2 import between
-from raplace.units import NS_PER_S
 
 SCENARIO = "long_city"
 PREFIX_FOLDER = "synthetic_prefix"

@@ -34,8 +34,7 @@ from radar_slam.evaluation.nees import FactorNees, factor_nees
 from radar_slam.loops.config import CHI2_3DOF_99
 from radar_slam.pipeline import Pipeline, Results, load_config
 from radar_slam.pipeline.steps import odometry_factor
-from raplace.se2 import between, wrap_angle
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, between, wrap_angle
 
 logger = logging.getLogger("bench_nees")
 

@@ -37,17 +37,14 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.config import OdometryConfig
-from odometry.deskew import motion_from_twist
-from odometry.odometry import Odometry, OdometryResult
+from odometry import Odometry, OdometryConfig, OdometryResult, motion_from_twist
 from radar_slam.datasets import RadarFrame, open_sequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import evaluate
 from radar_slam.pipeline import load_config
 from radar_slam.plots import plot_trajectories
 from radar_slam.trajectory import Trajectory
-from raplace.se2 import between, compose, wrap_angle
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, between, compose, wrap_angle
 from raplace.warp import polar_sample_coords, remap
 
 logger = logging.getLogger("bench_odometry")

@@ -37,7 +37,7 @@ def run_sequence(spec: str, data_root: Path | None, max_frames: int | None, out:
     """Run the odometry over one sequence in this process; write poses and costs to `out`."""
     import cv2
 
-    from odometry.odometry import Odometry
+    from odometry import Odometry
     from radar_slam.datasets import open_sequence
     from radar_slam.evaluation.metrics import evaluate
     from radar_slam.trajectory import Trajectory

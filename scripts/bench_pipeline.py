@@ -51,7 +51,7 @@ from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.false_loops import FalseLoopInjection
 from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
-from raplace.retrieval import PlaceRecognizer
+from raplace import PlaceRecognizer
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_raplace import pin_to_one_core  # noqa: E402

@@ -31,7 +31,14 @@ import numpy as np
 from numpy.typing import NDArray
 from skimage.transform import radon
 
-from raplace.config import RaPlaceConfig, RetrievalConfig
+from raplace import (
+    PlaceRecognizer,
+    PoseEstimator,
+    RaPlaceConfig,
+    RetrievalConfig,
+    ScanContextExtractor,
+    ScanContextRecognizer,
+)
 from raplace.descriptor import (
     DescriptorExtractor,
     descriptor_angles,
@@ -39,9 +46,6 @@ from raplace.descriptor import (
     transform_magnitude,
     z_normalise,
 )
-from raplace.pose import PoseEstimator
-from raplace.retrieval import PlaceRecognizer
-from raplace.scancontext import ScanContextExtractor, ScanContextRecognizer
 
 MULRAN_SCAN = (
     Path(__file__).resolve().parents[2]

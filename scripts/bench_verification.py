@@ -34,8 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from odometry import Odometry
-from odometry.registration import PreparedScan
+from odometry import Odometry, PreparedScan
 from radar_slam.datasets import open_sequence
 from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.loops.records import KeyScan, Verification

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from radar_slam.datasets import RadarFrame, RadarSequence, open_sequence
 from radar_slam.placerec import method_runs, with_exclusion
-from raplace.config import ExclusionConfig, RaPlaceConfig
+from raplace import ExclusionConfig, RaPlaceConfig
 
 log = logging.getLogger("pr_sensitivity")
 

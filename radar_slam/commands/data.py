@@ -13,7 +13,7 @@ from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.datasets import RadarFrame, RadarSequence, data_root, families, open_sequence
 from radar_slam.datasets.registry import family_folder
 from radar_slam.errors import RadarSlamError
-from raplace.units import NS_PER_MS, NS_PER_S
+from raplace import NS_PER_MS, NS_PER_S
 
 AZIMUTH_SPACING_TOLERANCE = 0.1
 """Largest deviation of one azimuth step from the mean step, as a fraction of the mean."""

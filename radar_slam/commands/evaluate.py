@@ -25,7 +25,7 @@ from radar_slam.evaluation.time_offset import (
 from radar_slam.outputs import json_text
 from radar_slam.results import check_output_file, write_text_atomically
 from radar_slam.trajectory import Trajectory, detect_format, read_trajectory
-from raplace.units import NS_PER_MS
+from raplace import NS_PER_MS
 
 MISSING = "n/a"
 TABLE_COLUMNS = (

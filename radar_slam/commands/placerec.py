@@ -53,8 +53,7 @@ from radar_slam.placerec import (
 )
 from radar_slam.plots import plot_pr_curves
 from radar_slam.results import check_output_root, write_result_dir
-from raplace.config import ExclusionConfig, RaPlaceConfig
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, ExclusionConfig, RaPlaceConfig
 
 log = logging.getLogger(__name__)
 

@@ -52,8 +52,7 @@ from radar_slam.datasets.mulran import gt_max_gap_ns, interpolate_poses
 from radar_slam.datasets.navtech import OXFORD_HEADER_BYTES
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
-from raplace import checks
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, checks
 
 logger = logging.getLogger(__name__)
 

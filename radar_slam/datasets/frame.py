@@ -8,7 +8,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.scan import RadarFrame
+from odometry import RadarFrame
 
 
 @dataclass(frozen=True)

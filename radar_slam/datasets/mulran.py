@@ -58,8 +58,7 @@ from radar_slam.datasets.navtech import (
 from radar_slam.datasets.registry import Family, register
 from radar_slam.datasets.sweep import SweepTimes
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
-from raplace import checks, se2
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, checks, compose, wrap_angle
 
 logger = logging.getLogger(__name__)
 
@@ -183,7 +182,7 @@ def interpolate_poses(
         [np.interp(q, t, poses[:, 0]), np.interp(q, t, poses[:, 1]), np.interp(q, t, yaw)],
         axis=-1,
     )
-    result[:, 2] = se2.wrap_angle(result[:, 2])
+    result[:, 2] = wrap_angle(result[:, 2])
     result[~gt_covers(times_ns, query_ns, max_gap_ns)] = np.nan
     return result
 
@@ -235,7 +234,7 @@ def radar_ground_truth(gt_path: Path, scan_stamps_ns: NDArray[np.int64]) -> NDAr
             len(scan_stamps_ns),
             tolerance_ns / NS_PER_S,
         )
-    return se2.compose(base_at_scans, MULRAN_T_BASE_RADAR)
+    return compose(base_at_scans, MULRAN_T_BASE_RADAR)
 
 
 def _read_stamp_list(path: Path) -> NDArray[np.int64]:

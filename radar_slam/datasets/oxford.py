@@ -49,8 +49,7 @@ from radar_slam.datasets.navtech import (
 )
 from radar_slam.datasets.registry import Family, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
-from raplace import checks, se2
-from raplace.units import NS_PER_S, NS_PER_US, US_PER_S
+from raplace import NS_PER_S, NS_PER_US, US_PER_S, checks, compose
 
 logger = logging.getLogger(__name__)
 
@@ -157,7 +156,7 @@ class RadarOdometryTable:
                         target,
                     )
                     return poses
-                pose = se2.compose(pose, self.motion[row])
+                pose = compose(pose, self.motion[row])
                 current = int(self.source_radar_us[row])
             if current != target:
                 logger.warning(

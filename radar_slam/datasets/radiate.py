@@ -49,8 +49,7 @@ from radar_slam.datasets.radiate_gnss import (
 from radar_slam.datasets.registry import Family, register
 from radar_slam.datasets.sweep import SweepTimes
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
-from raplace import checks
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, checks
 
 RADIATE_FAMILY = "radiate"
 RADIATE_SENSOR = "navtech-cts350x-radiate"

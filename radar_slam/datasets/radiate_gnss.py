@@ -31,8 +31,7 @@ from pyproj import Transformer
 from radar_slam.datasets._io import check_strictly_increasing
 from radar_slam.datasets.mulran import interpolate_poses
 from radar_slam.errors import DatasetFormatError
-from raplace import se2
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, compose, wrap_angle
 
 logger = logging.getLogger(__name__)
 
@@ -151,8 +150,8 @@ def heading_bias_rad(times_ns: NDArray[np.int64], poses: NDArray[np.float64]) ->
     if not moving.any():
         return float("nan"), 0
     course = np.arctan2(step[:, 1], step[:, 0])
-    mid_heading = poses[:-1, 2] + 0.5 * se2.wrap_angle(np.diff(poses[:, 2]))
-    difference = se2.wrap_angle(mid_heading - course)[moving]
+    mid_heading = poses[:-1, 2] + 0.5 * wrap_angle(np.diff(poses[:, 2]))
+    difference = wrap_angle(mid_heading - course)[moving]
     return float(np.median(difference)), int(moving.sum())
 
 
@@ -193,7 +192,7 @@ class GnssTrack:
         query = np.asarray(query_ns, dtype=np.int64)
         antenna = interpolate_poses(self.times_ns, self.poses, query, max_gap_ns=MAX_FIX_GAP_NS)
         lever = np.array([lever_arm_m[0], lever_arm_m[1], 0.0])
-        return se2.compose(antenna, lever)
+        return compose(antenna, lever)
 
     def scans_in_outages(self, query_ns: ArrayLike) -> int:
         """How many of `query_ns` (GNSS clock) fall inside an outage."""

@@ -54,8 +54,7 @@ from radar_slam.datasets.registry import Family, register
 from radar_slam.datasets.sweep import SweepTimes
 from radar_slam.errors import ConfigError, DatasetFormatError, DatasetNotFoundError
 from radar_slam.trajectory import yaw_from_quaternion
-from raplace import checks
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, checks
 
 logger = logging.getLogger(__name__)
 

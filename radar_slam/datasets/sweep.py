@@ -14,8 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from raplace import checks
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, checks
 
 SCAN_PERIOD_TOLERANCE = 0.2
 """A gap between radar stamps counts as one sweep if within +-20 % of the nominal one."""

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.loops import KeyScan, Verification, Verifier
-from raplace.retrieval import Candidate, Recognizer
+from raplace import Candidate, Recognizer
 
 
 @dataclass(frozen=True)

@@ -29,8 +29,7 @@ from numpy.typing import NDArray
 
 from radar_slam.errors import TrajectoryError
 from radar_slam.trajectory import Trajectory
-from raplace.se2 import between, compose, inverse, wrap_angle
-from raplace.units import NS_PER_MS
+from raplace import NS_PER_MS, between, compose, inverse, wrap_angle
 
 logger = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from raplace.se2 import between, wrap_angle
+from raplace import between, wrap_angle
 
 FloatArray = NDArray[np.float64]
 

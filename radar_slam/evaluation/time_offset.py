@@ -19,8 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.trajectory import Trajectory
-from raplace import se2
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -218,7 +217,7 @@ def ground_truth_at(ground_truth: Trajectory, times_ns: NDArray[np.int64]) -> Fl
     weight = (query[ok] - t[left][ok]) / span[ok]
     a, b = poses[left][ok], poses[right][ok]
     result[ok, :2] = a[:, :2] + weight[:, None] * (b[:, :2] - a[:, :2])
-    result[ok, 2] = se2.wrap_angle(a[:, 2] + weight * se2.wrap_angle(b[:, 2] - a[:, 2]))
+    result[ok, 2] = wrap_angle(a[:, 2] + weight * wrap_angle(b[:, 2] - a[:, 2]))
     return result
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from raplace.se2 import between, wrap_angle
+from raplace import between, wrap_angle
 
 REVISIT_CRITERION_M = 20.0
 """Two scans less than this apart (ground truth) see the same place (RaPlace's criterion)."""

@@ -35,7 +35,7 @@ from radar_slam.loops.verification import (
     loop_covariance,
     motion_compensated,
 )
-from raplace.retrieval import Recognizer
+from raplace import Recognizer
 
 __all__ = [
     "ConsistencyConfig",

@@ -6,8 +6,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from odometry import OdometryConfig
-from raplace import checks
-from raplace.config import RaPlaceConfig
+from raplace import RaPlaceConfig, checks
 
 CHI2_3DOF_99 = 11.345
 """Chi-square quantile at 99 % for 3 degrees of freedom (x, y, yaw)."""

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from radar_slam.loops.config import ConsistencyConfig
 from radar_slam.loops.records import LoopStatus, VerifiedLoop
-from raplace.se2 import adjoint, between, compose, wrap_angle
+from raplace import adjoint, between, compose, wrap_angle
 
 FloatArray = NDArray[np.float64]
 POSE_DIM = 3

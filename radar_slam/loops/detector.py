@@ -29,8 +29,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.scan import Scan
-from odometry.velocity import Velocity
+from odometry import Scan, Velocity
 from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
@@ -53,10 +52,7 @@ from radar_slam.loops.sweep_twist import (
 from radar_slam.loops.throttle import StretchThrottle
 from radar_slam.loops.tracking import Refiner, predicted_loop
 from radar_slam.loops.verification import GeometricVerifier, Verifier
-from raplace.descriptor import DescriptorExtractor
-from raplace.retrieval import Candidate, PlaceRecognizer, Recognizer
-from raplace.se2 import between
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S, Candidate, DescriptorExtractor, PlaceRecognizer, Recognizer, between
 
 log = logging.getLogger(__name__)
 

@@ -19,8 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from raplace.config import ExclusionConfig, RetrievalConfig
-from raplace.retrieval import Recognizer
+from raplace import ExclusionConfig, Recognizer, RetrievalConfig
 
 FloatArray = NDArray[np.float64]
 

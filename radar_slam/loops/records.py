@@ -12,7 +12,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.scan import Scan
+from odometry import Scan
 from radar_slam.errors import RadarSlamError
 
 FloatArray = NDArray[np.float64]

@@ -27,15 +27,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry.config import OdometryConfig
-from odometry.deskew import twist_from_motion
-from odometry.history import OdometryResult
-from odometry.recovery import plausible_twist
-from odometry.reference_time import interpolated_twist
-from odometry.scan import Scan
-from odometry.velocity import Velocity
+from odometry import (
+    OdometryConfig,
+    OdometryResult,
+    Scan,
+    Velocity,
+    interpolated_twist,
+    plausible_twist,
+    twist_from_motion,
+)
 from radar_slam.loops.verification import mean_acquisition_offset_s
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S
 
 FloatArray = NDArray[np.float64]
 

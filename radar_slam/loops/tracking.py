@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from radar_slam.loops.records import KeyScan, Verification
-from raplace.se2 import between, compose
+from raplace import between, compose
 
 FloatArray = NDArray[np.float64]
 

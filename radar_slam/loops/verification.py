@@ -17,18 +17,31 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import rate_search
-from odometry.config import PreprocessConfig
-from odometry.deskew import motion_from_twist
-from odometry.preprocess import PolarScan
-from odometry.registration import MotionEstimate, PreparedScan, prepare, register
-from odometry.scan import RadarFrame, Scan
+from odometry import (
+    MotionEstimate,
+    PolarScan,
+    PreparedScan,
+    PreprocessConfig,
+    RadarFrame,
+    Scan,
+    motion_from_twist,
+    prepare,
+    register,
+    searched_registration,
+)
 from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig, LoopCovarianceConfig
 from radar_slam.loops.records import KeyScan, Verification
-from raplace.pose import PoseEstimator, PoseSpectrum, RelativePose
-from raplace.se2 import between, compose, inverse, rotate_covariance, wrap_angle
-from raplace.units import NS_PER_S
+from raplace import (
+    NS_PER_S,
+    PoseEstimator,
+    PoseSpectrum,
+    RelativePose,
+    between,
+    compose,
+    rotate_covariance,
+    wrap_angle,
+)
 
 FloatArray = NDArray[np.float64]
 OFFERS_KEPT = 2
@@ -252,26 +265,12 @@ class GeometricVerifier:
     ) -> MotionEstimate:
         """`estimate`, or the registration with the query de-skewed at a searched yaw rate when
         that correlates more strongly (`VerificationConfig.yaw_rate_search`; low frame rates
-        only). The search registers the query variants against the match (`rate_search`); the
-        result is registered again the usual way round, seeded with `estimate`."""
-        refinement = self.cfg.refinement
-        span = query.twist_span_s
-        if (
-            not self.cfg.verification.yaw_rate_search
-            or prepared.twist is None
-            or span is None
-            or span < rate_search.LOW_RATE_INTERVAL_S
-            or not estimate.ok
-        ):
+        only; `odometry.searched_registration`)."""
+        if not self.cfg.verification.yaw_rate_search:
             return estimate
-        swapped = register(aligned, prepared, refinement, inverse(estimate.motion))
-        if not swapped.ok:
-            return estimate
-        found, _ = rate_search.searched(aligned, prepared, swapped, refinement, register)
-        if found is prepared:
-            return estimate
-        again = register(found, aligned, refinement, estimate.motion)
-        return again if again.ok and again.quality > estimate.quality else estimate
+        return searched_registration(
+            prepared, aligned, estimate, self.cfg.refinement, query.twist_span_s
+        )
 
     def _map_spectrum(self, match: KeyScan) -> PoseSpectrum:
         key = (match.key, int(match.timestamp_ns))  # a key reused for another scan misses

@@ -22,8 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import OdometryConfig, OdometryResult
-from odometry.velocity import Velocity
+from odometry import OdometryConfig, OdometryResult, Velocity
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import RadarSlamError, TrajectoryError
 from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
@@ -39,9 +38,7 @@ from radar_slam.maps.keyframes import (
     describe_keyframe,
 )
 from radar_slam.trajectory import Trajectory
-from raplace.config import DescriptorConfig
-from raplace.descriptor import DescriptorExtractor
-from raplace.se2 import between, compose, rotate_covariance
+from raplace import DescriptorConfig, DescriptorExtractor, between, compose, rotate_covariance
 
 if TYPE_CHECKING:
     from radar_slam.pipeline import Results

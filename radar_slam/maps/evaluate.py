@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from radar_slam.maps.format import Map
 from radar_slam.maps.localizer import Localization
-from raplace.se2 import between, compose, wrap_angle
+from raplace import between, compose, wrap_angle
 
 FloatArray = NDArray[np.float64]
 

@@ -17,12 +17,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import OdometryConfig, Scan
-from odometry.preprocess import PolarScan, preprocess_polar, sample_scan
-from odometry.scan import RadarFrame
+from odometry import OdometryConfig, PolarScan, RadarFrame, Scan, preprocess_polar, sample_scan
 from radar_slam.errors import RadarSlamError
-from raplace import checks
-from raplace.warp import CartesianGrid
+from raplace import CartesianGrid, checks
 
 PIXEL_MAX = 255
 """uint8 full scale of a re-made polar scan."""

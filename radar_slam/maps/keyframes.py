@@ -24,14 +24,11 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryConfig, OdometryResult, Scan
-from odometry.preprocess import PolarScan, preprocess_polar
-from odometry.velocity import Velocity
+from odometry import OdometryConfig, OdometryResult, PolarScan, Scan, Velocity, preprocess_polar
 from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_velocity, sweep_twist
 from radar_slam.maps.config import MapsConfig
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
-from raplace.config import DescriptorConfig
-from raplace.descriptor import DescriptorExtractor
+from raplace import DescriptorConfig, DescriptorExtractor
 
 log = logging.getLogger(__name__)
 

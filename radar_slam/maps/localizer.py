@@ -44,10 +44,16 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import Odometry, OdometryResult, Scan
-from odometry.deskew import twist_from_motion
-from odometry.registration import PreparedScan, prepare, register
-from odometry.scan import RadarFrame
+from odometry import (
+    Odometry,
+    OdometryResult,
+    PreparedScan,
+    RadarFrame,
+    Scan,
+    prepare,
+    register,
+    twist_from_motion,
+)
 from radar_slam.config import merge
 from radar_slam.errors import ConfigError, GraphError
 from radar_slam.graph import GraphConfig, PoseGraph
@@ -60,11 +66,19 @@ from radar_slam.loops import (
 from radar_slam.loops.verification import turned
 from radar_slam.maps.format import Map, MapError
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
-from raplace.config import DescriptorConfig, ExclusionConfig
-from raplace.descriptor import DescriptorExtractor
-from raplace.retrieval import PlaceRecognizer
-from raplace.se2 import adjoint, between, compose, inverse, rotate_covariance, wrap_angle
-from raplace.units import NS_PER_S
+from raplace import (
+    NS_PER_S,
+    DescriptorConfig,
+    DescriptorExtractor,
+    ExclusionConfig,
+    PlaceRecognizer,
+    adjoint,
+    between,
+    compose,
+    inverse,
+    rotate_covariance,
+    wrap_angle,
+)
 
 if TYPE_CHECKING:
     from radar_slam.pipeline import PipelineConfig

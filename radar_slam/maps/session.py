@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.velocity import Velocity
+from odometry import Velocity
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import PoseGraph
@@ -61,8 +61,7 @@ from radar_slam.maps.localizer import (
 )
 from radar_slam.pipeline import BACKEND_REJECT_WEIGHT, PipelineConfig, Results, odometry_factor
 from radar_slam.trajectory import Trajectory
-from raplace.descriptor import DescriptorExtractor
-from raplace.se2 import between, compose, inverse
+from raplace import DescriptorExtractor, between, compose, inverse
 
 log = logging.getLogger(__name__)
 

@@ -16,8 +16,7 @@ import numpy as np
 from radar_slam.config import merge
 from radar_slam.errors import ConfigError
 from radar_slam.maps.images import ImageGeometry
-from raplace import checks
-from raplace.config import DescriptorConfig
+from raplace import DescriptorConfig, checks
 
 if TYPE_CHECKING:
     from radar_slam.maps.format import Map

@@ -32,8 +32,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
-from odometry import OdometryResult
-from odometry.registration import PreparedScan
+from odometry import OdometryResult, PreparedScan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.loops import LoopConstraint, LoopDecision, LoopDetectorProtocol
 from radar_slam.maps.keyframes import KeyframeStage, NullKeyframeRecorder

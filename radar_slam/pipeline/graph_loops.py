@@ -36,7 +36,7 @@ from radar_slam.pipeline.steps import (
     review_loops,
     sequence_label,
 )
-from raplace.se2 import between, wrap_angle
+from raplace import between, wrap_angle
 
 logger = logging.getLogger(__name__)
 

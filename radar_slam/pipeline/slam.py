@@ -37,8 +37,7 @@ import time
 
 import numpy as np
 
-from odometry import Odometry, OdometryResult
-from odometry.registration import PreparedScan
+from odometry import Odometry, OdometryResult, PreparedScan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import LoopConstraint, PoseGraph

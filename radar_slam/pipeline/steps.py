@@ -24,7 +24,7 @@ from radar_slam.pipeline.records import (
     SlamMetrics,
 )
 from radar_slam.trajectory import Trajectory
-from raplace.se2 import rotate_covariance
+from raplace import rotate_covariance
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from matplotlib.patches import Ellipse, Polygon  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 from radar_slam.sim.generate import Scene, make_renderer, render_frame  # noqa: E402
-from raplace.warp import CartesianGrid, CartesianWarper  # noqa: E402
+from raplace import CartesianGrid, CartesianWarper  # noqa: E402
 
 SCAN_HALF_EXTENT_M = 80.0
 """Cartesian scans show +-80 m around the sensor."""

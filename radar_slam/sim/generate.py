@@ -34,7 +34,7 @@ from radar_slam.sim.writer import (
     write_json,
     write_stamps,
 )
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S
 
 logger = logging.getLogger(__name__)
 

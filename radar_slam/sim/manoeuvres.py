@@ -40,7 +40,7 @@ from radar_slam.sim.driving import (
 )
 from radar_slam.sim.route import Trajectory, expand_waypoints
 from radar_slam.sim.town import FEATURE_STEP_M, FREE, Town
-from raplace.se2 import wrap_angle
+from raplace import wrap_angle
 
 FloatArray = NDArray[np.float64]
 

@@ -43,7 +43,7 @@ from radar_slam.sim.physics import (
 from radar_slam.sim.route import Trajectory
 from radar_slam.sim.scatterers import Occluders, World
 from radar_slam.sim.sensor import SensorConfig
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S
 
 F32 = NDArray[np.float32]
 UNIFORM_U8_MEAN = 127.5

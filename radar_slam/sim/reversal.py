@@ -52,7 +52,7 @@ from radar_slam.sim.route import (
     speed_cap,
 )
 from radar_slam.sim.town import Town, offset_polyline, polyline_frames
-from raplace.se2 import wrap_angle
+from raplace import wrap_angle
 
 logger = logging.getLogger(__name__)
 

@@ -21,7 +21,7 @@ from scipy.ndimage import gaussian_filter1d
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
 from radar_slam.errors import RadarSlamError
 from radar_slam.sim.town import Town, offset_polyline, resample_polyline
-from raplace.se2 import compose, wrap_angle
+from raplace import compose, wrap_angle
 
 FloatArray = NDArray[np.float64]
 

@@ -38,7 +38,7 @@ from radar_slam.sim.route import DrivingConfig
 from radar_slam.sim.sensor import SensorConfig
 from radar_slam.sim.town import TownConfig
 from radar_slam.sim.world import ObjectConfig
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S
 
 Waypoints = tuple[tuple[int, int], ...]
 

@@ -26,7 +26,7 @@ from radar_slam.datasets.navtech import (
     MULRAN_RANGE_RESOLUTION_M,
     SCAN_RATE_HZ,
 )
-from raplace.units import NS_PER_S
+from raplace import NS_PER_S
 
 TWO_PI = 2.0 * np.pi
 

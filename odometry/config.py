@@ -82,10 +82,8 @@ class QualityConfig:
         "min_sigma_yaw_deg": f"{CONSTANT} (odometry.registration.MIN_SIGMA_YAW_DEG)",
         "velocity_lag_fraction": f"{CONSTANT} (odometry.uncertainty.VELOCITY_LAG_FRACTION)",
         "deskew_error_fraction": f"{CONSTANT} (odometry.uncertainty.DESKEW_ERROR_FRACTION)",
-        "sigma_yaw_deg_per_deg": f"{CONSTANT} (odometry.uncertainty.TURN_SIGMA_FRACTION)",
-        "deskew_yaw_error_fraction": (
-            f"{CONSTANT} (odometry.uncertainty.DESKEW_YAW_ERROR_FRACTION)"
-        ),
+        "sigma_yaw_deg_per_deg": "removed: rotation terms in turns cost SLAM accuracy",
+        "deskew_yaw_error_fraction": "removed: rotation terms in turns cost SLAM accuracy",
     }
     min_peak_quality: float = 6.0
     max_speed_mps: float = 45.0

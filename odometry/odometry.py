@@ -54,7 +54,7 @@ from odometry.reference_time import (
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.scan import Scan
 from odometry.state import OdometryState, ScanNode
-from odometry.uncertainty import conversion_covariance, factor_covariance, unseen_covariance
+from odometry.uncertainty import conversion_covariance, deskew_covariance, factor_covariance
 from odometry.velocity import (
     Velocity,
     bounded_twist,
@@ -377,9 +377,7 @@ class Odometry:
         change: FloatArray,
     ) -> FloatArray:
         """The covariance of `node`'s result (in `previous`'s axes)."""
-        registration_covariance = estimate.covariance + unseen_covariance(
-            estimate.motion, change, node.scan
-        )
+        registration_covariance = estimate.covariance + deskew_covariance(change, node.scan)
         return factor_covariance(
             registration_covariance,
             reference.pose,

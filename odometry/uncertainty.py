@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from odometry.registration import PreparedScan
-from raplace.se2 import between, rotate_covariance, wrap_angle
+from raplace.se2 import between, rotate_covariance
 
 FloatArray = NDArray[np.float64]
 
@@ -23,13 +23,6 @@ DESKEW_ERROR_FRACTION = 1.25
 """A scan de-skewed with a velocity that lags the vehicle's (braking, a steering change) is bent
 by about the velocity's last change times half a sweep; this multiple of that bend is its
 translation standard deviation (above 1: the measured change itself lags the true one)."""
-DESKEW_YAW_ERROR_FRACTION = 1.25
-"""The same for the rotation bend [rad per rad]."""
-TURN_SIGMA_FRACTION = 0.1
-"""A registration's rotation error that its peak does not show grows with the turn (less
-overlap, a changed perspective): this fraction of the turn, as a standard deviation. With the
-yaw bend term it makes the odometry's yaw covariances hold the errors measured against the INS
-heading of the real RADIATE drive (`docs/decisions.md`)."""
 
 
 def conversion_covariance(
@@ -52,22 +45,16 @@ def conversion_covariance(
     return image_time_s**2 * velocity_covariance
 
 
-def unseen_covariance(
-    motion: FloatArray, velocity_change: ArrayLike, scan: PreparedScan
-) -> FloatArray:
-    """(3, 3) covariance [m^2, rad^2] of registration errors the correlation peak does not show:
-    a rotation error growing with the turn of `motion` (3,) (dx, dy [m], dyaw [rad];
-    `TURN_SIGMA_FRACTION`), and the bend of a scan de-skewed with a velocity that lags the
-    vehicle's by about `velocity_change` (3,) (its last change [m/s, m/s, rad/s]) over half a
-    sweep (`DESKEW_ERROR_FRACTION`, `DESKEW_YAW_ERROR_FRACTION`). The translation term is
-    isotropic, so the axes it is expressed in do not matter."""
+def deskew_covariance(velocity_change: ArrayLike, scan: PreparedScan) -> FloatArray:
+    """(3, 3) covariance [m^2] of a registration error the correlation peak does not show: the
+    bend of a scan de-skewed with a velocity that lags the vehicle's by about `velocity_change`
+    (3,) (its last change [m/s, m/s, rad/s]) over half a sweep, scaled by
+    `DESKEW_ERROR_FRACTION`. It is isotropic in translation, so its axes do not matter."""
     timing = scan.polar.timing
     half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
     bend = half_sweep_s * np.abs(np.asarray(velocity_change, dtype=float))
     sigma_xy_sq = DESKEW_ERROR_FRACTION**2 * float(bend[0] ** 2 + bend[1] ** 2)
-    sigma_turn = TURN_SIGMA_FRACTION * abs(wrap_angle(float(motion[2])))
-    sigma_bend_yaw = DESKEW_YAW_ERROR_FRACTION * float(bend[2])
-    return np.diag([sigma_xy_sq, sigma_xy_sq, sigma_turn**2 + sigma_bend_yaw**2])
+    return np.diag([sigma_xy_sq, sigma_xy_sq, 0.0])
 
 
 def factor_covariance(

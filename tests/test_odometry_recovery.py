@@ -18,7 +18,7 @@ from test_odometry_sim import render
 
 from odometry import OdometryConfig, estimate_motion
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.odometry import Odometry, OdometryResult
+from odometry.odometry import Odometry
 from odometry.recovery import plausible_twist
 from odometry.registration import prepare, register_images
 from odometry.velocity import Velocity, bounded_twist
@@ -51,12 +51,6 @@ MAX_DRIVE_ERROR_FRACTION = 0.02
 """End-point error of the short drives below, as a fraction of the distance driven."""
 MAX_DRIFT_PCT_1HZ = 2.5
 """KITTI drift bar at --stride 4 (1 Hz)."""
-NEES_RANGE = (1.0, 6.0)
-"""Mean normalised squared error of the scan-to-reference motions in hard driving at 4 Hz (3 when
-calibrated; 36-52 before the covariances grew with the turn and the velocity's change, see
-`QualityConfig`)."""
-NEES_RANGE_1HZ = (1.0, 8.0)
-"""The same at 1 Hz (measured up to 6.6 on tiny_junction_turns; 13-48 before)."""
 MAX_REVERSAL_DRIFT_PCT = 1.8
 MAX_REVERSAL_DRIFT_DEG = 1.25
 """KITTI drift [%, deg/100 m] on tiny_roundabouts at 4 Hz (higher while every scan was de-skewed
@@ -287,15 +281,11 @@ def driven(
 )
 def test_hard_driving_at_one_hertz(synthetic_root: Path, scenario: str) -> None:
     """The driving manoeuvres (reduced bins) at --stride 4 (1 Hz): turn-arounds, reverse gear
-    at full lock, curvature steps; no run of more than 2 gaps, the drift of the reported
-    (revised) poses within the 1 Hz bar, and the covariances of the prompt results consistent."""
-    reported, _, drift = driven(synthetic_root, scenario, stride=4)
-    assert reported.longest_gap_run <= MAX_GAP_RUN
-    assert drift.trans_pct <= MAX_DRIFT_PCT_1HZ, drift
-    odometry, truth, _ = driven(synthetic_root, scenario, stride=4)
+    at full lock, curvature steps; no run of more than 2 gaps and the drift within the 1 Hz
+    bar."""
+    odometry, _, drift = driven(synthetic_root, scenario, stride=4)
     assert odometry.longest_gap_run <= MAX_GAP_RUN
-    nees = reference_nees(odometry.results, truth)
-    assert NEES_RANGE_1HZ[0] <= nees.mean() <= NEES_RANGE_1HZ[1], nees.mean()
+    assert drift.trans_pct <= MAX_DRIFT_PCT_1HZ, drift
 
 
 def test_yaw_rate_reversals_at_4_hz(synthetic_root: Path) -> None:
@@ -306,32 +296,3 @@ def test_yaw_rate_reversals_at_4_hz(synthetic_root: Path) -> None:
     assert odometry.gaps == []
     assert drift.trans_pct <= MAX_REVERSAL_DRIFT_PCT, drift
     assert drift.rot_deg_per_100m <= MAX_REVERSAL_DRIFT_DEG, drift
-
-
-@pytest.mark.parametrize("scenario", ["tiny_three_point_turn", "tiny_roundabout"])
-def test_covariances_in_tight_manoeuvres_at_4_hz(synthetic_root: Path, scenario: str) -> None:
-    """Full lock, reversing and a roundabout at 4 Hz: the reported covariances hold the errors
-    (mean NEES about 3 with the `CALIBRATED` terms; a peak-only covariance gives 36-52 here)."""
-    sequence = open_sequence(f"synthetic/{scenario}", synthetic_root)
-    truth = sequence.ground_truth
-    assert truth is not None
-    odometry = run([sequence[k] for k in range(len(sequence))], OdometryConfig())
-    nees = reference_nees(odometry.results, truth)
-    assert NEES_RANGE[0] <= nees.mean() <= NEES_RANGE[1], nees.mean()
-
-
-def reference_nees(results: list[OdometryResult], truth: FloatArray) -> FloatArray:
-    """NEES of each registered scan's pose relative to its reference scan (`keyframe_motion`)
-    under its covariance, turned back from the previous scan's axes into the reference's."""
-    nees = []
-    for r in results[1:]:
-        if not r.ok:
-            continue
-        error = r.keyframe_motion - se2.between(truth[r.keyframe_index], truth[r.index])
-        error[2] = se2.wrap_angle(error[2])
-        turn = float(se2.between(results[r.index - 1].pose, results[r.keyframe_index].pose)[2])
-        c, s = np.cos(turn), np.sin(turn)
-        back = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        covariance = back @ r.covariance @ back.T
-        nees.append(float(error @ np.linalg.solve(covariance, error)))
-    return np.array(nees)

@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
+from raplace.units import NS_PER_S
 
-NS_PER_S = 1e9
 FloatArray = NDArray[np.float64]
 TWIST_REFRESH_MPS = 0.25
 """A scan is re-rendered when its de-skew velocity is off by more than this [m/s]."""

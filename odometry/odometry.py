@@ -310,25 +310,7 @@ class Odometry:
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
         smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
         if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
-            rendered = deskew_choice.redeskewed(
-                reference,
-                base,
-                (scan, estimate),
-                interval_s,
-                state.velocity,
-                self.config,
-                self._register_images,
-            )
-            if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
-                rendered = deskew_choice.with_trend(
-                    reference, scan, estimate, state.velocity, self.config, self._register_images
-                )
-            scan, estimate = rendered
-            if state.velocity is not None:
-                last_quality = state.history[-1].quality
-                scan, estimate = deskew_choice.weak_searched(
-                    reference, (scan, estimate), last_quality, self.config, self._register_images
-                )
+            scan, estimate = self._rerendered(reference, base, scan, estimate, interval_s)
             image_pose = compose(reference.image_pose, estimate.motion)
             change = self._update_velocity(base, scan, image_pose, interval_s)
         else:
@@ -367,6 +349,28 @@ class Odometry:
             ok=True,
             quality=estimate.quality,
         )
+
+    def _rerendered(
+        self,
+        reference: ScanNode,
+        base: ScanNode,
+        scan: PreparedScan,
+        estimate: MotionEstimate,
+        interval_s: float,
+    ) -> tuple[PreparedScan, MotionEstimate]:
+        """The scan's de-skew after steps 3 and 4 of the module docstring: re-de-skewed at the
+        velocity measured since `base` (`interval_s` [s] before) when far from the rendered one,
+        else the yaw-rate trend where it correlates more strongly; then a weak peak searched."""
+        velocity, cfg, register = self._state.velocity, self.config, self._register_images
+        rendered = deskew_choice.redeskewed(
+            reference, base, (scan, estimate), interval_s, velocity, cfg, register
+        )
+        if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
+            rendered = deskew_choice.with_trend(reference, scan, estimate, velocity, cfg, register)
+        if velocity is None:
+            return rendered
+        last_quality = self._state.history[-1].quality
+        return deskew_choice.weak_searched(reference, rendered, last_quality, cfg, register)
 
     def _factor_covariance(
         self,

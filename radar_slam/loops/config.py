@@ -37,10 +37,9 @@ class VerificationConfig:
             represents: such loops' rotations are off by degrees. The default, 1 deg, puts the
             2 deg error bound of a true loop (`radar_slam.evaluation.truth`) at two sigmas.
         yaw_rate_search: at low frame rates (a query twist interpolated between odometry steps
-            at least `odometry.rate_search.LOW_RATE_INTERVAL_S` apart), the query's de-skew yaw
-            rate is searched by peak quality against the match (one round of
-            `odometry.rate_search`): in a
-            turn at 1 Hz the interpolated yaw rate can be tens of deg/s off the sweep's.
+            far apart), the query's de-skew yaw rate is searched by peak quality against the
+            match (`odometry.searched_registration`): in a turn at 1 Hz the interpolated yaw
+            rate can be tens of deg/s off the sweep's.
     """
 
     min_sinogram_quality: float = 0.25

@@ -203,15 +203,14 @@ class Pipeline:
             return self.odometry.register(frame)
 
     def _submit(self, frame: RadarFrame, prepared: PreparedScan | None, index: int) -> None:
-        """Hand scan `index` to the loop detector once the next scan has registered, with its
-        revised pose: the prompt pose of a scan swept across a yaw-rate step can be off by tens
-        of deg/s in the velocity the detector de-skews it with (the last scan: its prompt pose)."""
+        """Hand scan `index` to the loop detector with its odometry result (one scan after it
+        registered; the odometry no longer revises a result, so the delay only shifts when loops
+        are handed out)."""
         self.loops.submit(frame, self.odometry.result(index), index, prepared)
 
     def _extend_graph(self, result: OdometryResult) -> None:
-        """Add a scan to the graph once the next scan has registered, with its revised pose (its
-        motion from the previous revised pose): the prompt pose of a scan swept across a
-        yaw-rate step can be off by degrees (the last scan: its prompt pose)."""
+        """Add a scan to the graph with its odometry factor from the previous scan (one scan
+        after it registered, as `_submit`)."""
         with self.timer("graph"):
             if result.index == 0:
                 self.graph.add_keyframe(0, result.pose)

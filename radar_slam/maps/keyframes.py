@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from odometry import OdometryConfig, OdometryResult, PolarScan, Scan, Velocity, preprocess_polar
 from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_velocity, sweep_twist
 from radar_slam.maps.config import MapsConfig
-from radar_slam.maps.images import ImageGeometry, KeyframeImager
+from radar_slam.maps.images import KEYFRAME_IMAGE, ImageGeometry, KeyframeImager
 from raplace import DescriptorConfig, DescriptorExtractor
 
 log = logging.getLogger(__name__)
@@ -161,7 +161,7 @@ class KeyframeRecorder:
     and the `add` of the next, and `finish` once after the last; all from one thread.
 
     Args:
-        maps: the keyframe spacing and image geometry.
+        maps: the keyframe spacing (the image geometry is `KEYFRAME_IMAGE`).
         odometry: the odometry settings (conditioning, the vehicle's limits).
         descriptor: the RaPlace descriptor settings.
     """
@@ -172,7 +172,7 @@ class KeyframeRecorder:
         self.maps = maps
         self.odometry = odometry
         self.descriptor_config = descriptor
-        self.imager = KeyframeImager(maps.image, odometry)
+        self.imager = KeyframeImager(KEYFRAME_IMAGE, odometry)
         self.describe = DescriptorExtractor(descriptor)
         self.spacing = KeyframeSpacing(maps.keyframe_spacing_m)
         self._records: list[KeyframeRecord] = []
@@ -213,7 +213,7 @@ class KeyframeRecorder:
         return RecordedKeyframes(
             tuple(self._records),
             self.maps.keyframe_spacing_m,
-            self.maps.image,
+            KEYFRAME_IMAGE,
             self.descriptor_config,
             self.odometry,
         )

@@ -94,32 +94,25 @@ at this probability (3 degrees of freedom: 21.1, i.e. 4.6 sigma) is treated as a
 (11.3) made GNC reject true loops when the odometry covariance understates a strong drift
 (tests/test_graph.py, "strong" scenario)."""
 
+_RELINEARIZATION = (
+    "graph.ONLINE_ISAM2_RELINEARIZATION or radar_slam.graph.REFINED_ISAM2_RELINEARIZATION, "
+    "by final_pass"
+)
+_REPLACED_BY = {
+    "prior_sigmas": "graph.PRIOR_SIGMAS",
+    "isam2_relinearize_threshold": _RELINEARIZATION,
+    "isam2_relinearize_skip": _RELINEARIZATION,
+    "isam2_iterations": "graph.ISAM2_ITERATIONS",
+    "loop_update_interval": "pipeline.slam.LOOP_UPDATE_INTERVAL",
+    "settled_update_interval": "pipeline.slam.SETTLED_UPDATE_INTERVAL",
+    "settled_chi2": "pipeline.slam.SETTLED_CHI2",
+    "lm_max_iterations": "graph.LM_MAX_ITERATIONS",
+    "lm_relative_error_tol": "graph.LM_RELATIVE_ERROR_TOL",
+    "gnc_loss": "graph.GNC_LOSS",
+    "gnc_inlier_probability": "graph.GNC_INLIER_PROBABILITY",
+}
 REMOVED_KEYS = {
-    "prior_sigmas": "now a constant of the method (radar_slam.graph.PRIOR_SIGMAS)",
-    "isam2_relinearize_threshold": (
-        "now a constant of the method, by final_pass (radar_slam.graph."
-        "ONLINE_ISAM2_RELINEARIZATION, radar_slam.graph.REFINED_ISAM2_RELINEARIZATION)"
-    ),
-    "isam2_relinearize_skip": (
-        "now a constant of the method, by final_pass (radar_slam.graph."
-        "ONLINE_ISAM2_RELINEARIZATION, radar_slam.graph.REFINED_ISAM2_RELINEARIZATION)"
-    ),
-    "isam2_iterations": "now a constant of the method (radar_slam.graph.ISAM2_ITERATIONS)",
-    "loop_update_interval": (
-        "now a constant of the method (radar_slam.pipeline.slam.LOOP_UPDATE_INTERVAL)"
-    ),
-    "settled_update_interval": (
-        "now a constant of the method (radar_slam.pipeline.slam.SETTLED_UPDATE_INTERVAL)"
-    ),
-    "settled_chi2": "now a constant of the method (radar_slam.pipeline.slam.SETTLED_CHI2)",
-    "lm_max_iterations": "now a constant of the method (radar_slam.graph.LM_MAX_ITERATIONS)",
-    "lm_relative_error_tol": (
-        "now a constant of the method (radar_slam.graph.LM_RELATIVE_ERROR_TOL)"
-    ),
-    "gnc_loss": "now a constant of the method (radar_slam.graph.GNC_LOSS)",
-    "gnc_inlier_probability": (
-        "now a constant of the method (radar_slam.graph.GNC_INLIER_PROBABILITY)"
-    ),
+    key: f"now a constant of the method (radar_slam.{name})" for key, name in _REPLACED_BY.items()
 }
 """Keys of the `graph` section that are gone, and what replaced them (`raplace.config_io`)."""
 

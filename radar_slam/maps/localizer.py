@@ -2,13 +2,13 @@
 
 `Localizer(map, config).localize(frame)` places each scan in the map frame:
 
-- **lost -> relocalised.** Every `relocalise_every_m` of travel the scan's RaPlace descriptor is
+- **lost -> relocalised.** Every `RELOCALISE_EVERY_M` of travel the scan's RaPlace descriptor is
   looked up in the whole map (no exclusion window) and the best candidates are verified as loops
   are (`radar_slam.loops.GeometricVerifier`, both pi hypotheses of the rotation, against the
   keyframe's stored image made back into a scan); each that verifies gives a pose hypothesis
   T_map_scan = T_map_keyframe * z^-1, best registration quality first. Hypotheses are only
   believed once they make a chain (attempted at every scan once one is held), each agreeing with
-  the previous one carried forward by the odometry (`confirm_max_error_m/_deg`), from
+  the previous one carried forward by the odometry (`CONFIRM_MAX_ERROR_M/_DEG`), from
   `CONFIRM_KEYFRAMES` distinct keyframes over `CONFIRM_SCANS` scans or more: the keyframes' own
   map poses must then agree with each other and with the path driven, which a wrong match, or a
   run of them on a repetitive street, rarely does. The last keyframe may come from a tracking
@@ -17,9 +17,9 @@
 - **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is registered by
   phase correlation (`odometry.registration`, the loop verifier's refinement stage, with the
   predicted relative yaw in place of its sinogram stage) against the nearest map keyframes to
-  the prediction (within `search_radius_m`). A fix with a strong peak that agrees with
-  the prediction (`max_innovation_m/_deg`) enters a small pose graph (`radar_slam.graph`): the
-  scans of the latest `window_fixes` fixes joined by the odometry between them, each fix a loop
+  the prediction (within `SEARCH_RADIUS_M`). A fix with a strong peak that agrees with
+  the prediction (`MAX_INNOVATION_M/_DEG`) enters a small pose graph (`radar_slam.graph`): the
+  scans of the latest `WINDOW_FIXES` fixes joined by the odometry between them, each fix a loop
   factor (robust kernel) to its keyframe, the keyframes held by tight priors at their map poses.
   The fused pose of the newest scan is the new anchor of the prediction.
 - **lost.** Once `FAILED_FIXES_LOST` tracking fixes in a row have failed, the registration to
@@ -379,9 +379,9 @@ class Localizer:
     def _complete_chain(self, query: KeyScan, keyframes: set[int]) -> None:
         """A chain one keyframe short of `CONFIRM_KEYFRAMES` may take its last one from a
         tracking fix: the scan registered, as while tracking, against the map keyframes nearest
-        the chain's pose that are not in it, `fix_keyframes` of them whatever their distance
+        the chain's pose that are not in it, `FIX_KEYFRAMES` of them whatever their distance
         (a vehicle entering the map's route sees the keyframes beyond the two it matched from
-        farther than `search_radius_m`; one too far to share its view fails the registration or
+        farther than `SEARCH_RADIUS_M`; one too far to share its view fails the registration or
         the innovation gate). A fix that does not agree with the chain is dropped: it comes from
         the chain's own prediction, so it never starts one."""
         state = self.state
@@ -402,7 +402,7 @@ class Localizer:
 
     def _joins_chain(self, fix: _Fix) -> bool:
         """Append `fix` to the chain if it agrees with the latest hypothesis carried forward by
-        the odometry (`confirm_max_error_m/_deg`)."""
+        the odometry (`CONFIRM_MAX_ERROR_M/_DEG`)."""
         _cfg, state = self.cfg, self.state
         if not state.chain:
             return False

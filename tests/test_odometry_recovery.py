@@ -18,9 +18,10 @@ from test_odometry_sim import render
 
 from odometry import OdometryConfig, estimate_motion
 from odometry.deskew import motion_from_twist, twist_from_motion
+from odometry.history import ScanNode
 from odometry.odometry import Odometry
 from odometry.recovery import plausible_twist
-from odometry.registration import prepare, register_images
+from odometry.registration import MotionEstimate, PreparedScan, prepare, register_images
 from odometry.velocity import Velocity, bounded_twist
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarFrame
@@ -237,6 +238,37 @@ def test_recovery_after_injected_failures(
     error_m, error_deg = errors(after.pose, truth[after.index])
     assert error_m <= 0.3 and error_deg <= 1.0, (error_m, error_deg)
     assert end_error_fraction(odometry, truth) <= MAX_DRIVE_ERROR_FRACTION
+
+
+def test_the_last_registered_scan_stands_in_for_a_failed_keyframe(
+    tiny_scene: tuple[Scene, RenderTables],
+) -> None:
+    """When the keyframe cannot be registered (forced here for one scan), the last registered
+    scan, nearer in time, is tried: no gap, the pose is measured and that scan's successor
+    becomes the keyframe."""
+    scene, tables = tiny_scene
+    legs = [(4.0, np.array([8.0, 0.0, np.deg2rad(10.0)]))]
+    frames, truth = drive(scene, tables, START_S[0], legs, period_s=0.5)
+    plain = run(frames)
+    failing = next(k for k in range(4, len(frames)) if not plain.results[k - 1].is_keyframe)
+
+    class KeyframeFails(Odometry):
+        def _registered(
+            self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
+        ) -> MotionEstimate:
+            estimate = super()._registered(reference, scan, predicted)
+            if len(self.results) == failing and reference is self._state.keyframe:
+                return dataclasses.replace(estimate, ok=False, reason="forced")
+            return estimate
+
+    odometry = KeyframeFails()
+    for frame in frames:
+        odometry.register(frame)
+    result = odometry.results[failing]
+    assert result.ok and result.is_keyframe and odometry.gaps == []
+    assert result.keyframe_index == failing - 1
+    error_m, error_deg = errors(result.pose, truth[failing])
+    assert error_m <= 0.3 and error_deg <= 1.0, (error_m, error_deg)
 
 
 def test_the_motion_model_is_bounded() -> None:

@@ -7,9 +7,10 @@
    `registration.PreparedScan`): there a velocity error only smears the image symmetrically.
 2. Register its image against the keyframe's (`registration.register_images`, coarse and fine
    levels counting as one registration): globally, rotation over the full circle and translation
-   over the whole coarse image. When that fails or lands off the constant-velocity prediction
-   (`recovery.agrees`), register again seeded with the prediction; the stronger peak wins. The
-   prediction is a hint, never a veto, so a strong registration ends any run of failures.
+   over the whole coarse image. When that fails, or its peak is not far above the failure
+   threshold and it lands off the constant-velocity prediction (`recovery.agrees`), register
+   again seeded with the prediction; the stronger peak wins. The prediction is a hint, never a
+   veto, so a strong registration ends any run of failures.
 3. Measure the velocity between the last two image poses. When it is far from the one the scan
    was rendered with (hard braking, a curvature change), re-render the scan at the measured
    velocity and register once more (`deskew_choice.redeskewed`).
@@ -67,6 +68,10 @@ GAP_SIGMA_YAW_DEG = 5.0
 KEYFRAME_QUALITY_FACTOR = 2.0
 """A peak below this multiple of `quality.min_peak_quality` makes the scan the keyframe (the
 overlap with the keyframe is fading)."""
+UNAMBIGUOUS_QUALITY_FACTOR = 5.0
+"""A global registration whose peak is at least this multiple of `quality.min_peak_quality` is
+kept without a seeded one even off the prediction: the seeded search found the same motion there
+(docs/decisions.md)."""
 
 
 class Odometry:
@@ -215,14 +220,16 @@ class Odometry:
     def _registered(
         self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
     ) -> MotionEstimate:
-        """`scan`'s image registered against `reference`'s: globally, and when that fails or
-        disagrees with the prediction also seeded with it; the stronger peak wins."""
+        """`scan`'s image registered against `reference`'s: globally, and when that fails, or
+        has a weaker peak and disagrees with the prediction, also seeded with it; the stronger
+        peak wins."""
         cfg = self.config
         estimate = self._register_images(reference.scan, scan, cfg)
         if predicted is None:
             return estimate
         expected = between(reference.image_pose, predicted)
-        if estimate.ok and recovery.agrees(estimate.motion, expected, cfg):
+        strong = estimate.quality >= UNAMBIGUOUS_QUALITY_FACTOR * cfg.quality.min_peak_quality
+        if estimate.ok and (strong or recovery.agrees(estimate.motion, expected, cfg)):
             return estimate
         seeded = self._register_images(reference.scan, scan, cfg, hint=expected)
         if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):

@@ -1,16 +1,11 @@
 """Which de-skew a scan keeps: the re-renderings `Odometry` tries, and the yaw-rate search.
 
-A scan is first rendered at the running velocity without its yaw-rate trend. Each step below
-may render it again and register it again (seeded with the estimate so far); a new rendering is
-kept only where the images support it (a stronger peak) or the registration measured a
-different velocity: `with_trend` (a turn that goes on tightening), `redeskewed` (hard braking, a
-curvature step), `weak_searched` (a peak far weaker than the previous scan's: the yaw rate
-searched by peak quality, `searched`), `refreshed` (a new keyframe whose de-skew is stale).
-
-The search: rendered at a range of yaw rates and registered against one reference, the peak is
-strongest where the scan's de-skew matches the reference image's (a yaw rate relative to the
-reference's de-skew, which is what a registration of the two needs). Loop verification uses it
-at low frame rates (`searched_registration`).
+Each step renders the scan again and registers it again, seeded with the estimate so far; the
+new rendering is kept where its peak is stronger or the registration measured another velocity:
+`with_trend` (a tightening turn), `redeskewed` (hard braking, a curvature step), `weak_searched`
+(a collapsed peak: the yaw rate searched by peak quality, which peaks where the scan's de-skew
+matches the reference image's; also for loop queries, `searched_registration`), `refreshed` (a
+new keyframe whose de-skew is stale).
 """
 
 from __future__ import annotations

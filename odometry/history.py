@@ -24,9 +24,8 @@ class OdometryResult:
         pose: (3,) T_world_radar (x, y [m], yaw [rad]) at `timestamp_ns`; the world frame is the
             first scan's radar frame moved to `start_pose`.
         motion: (3,) this scan's pose in the previous scan's frame (zeros for the first scan).
-        covariance: (3, 3) covariance [m^2, m rad, rad^2], order (x, y, yaw), of this scan's
-            pose relative to the scan it was registered against (`keyframe_motion`), in the
-            previous scan's axes, so that it also serves (conservatively) for `motion`.
+        covariance: (3, 3) covariance [m^2, m rad, rad^2] (x, y, yaw) of `keyframe_motion`, in
+            the previous scan's axes (so that it also serves, conservatively, for `motion`).
         keyframe_index: index of the scan it was registered against (the keyframe, or the last
             registered scan when the keyframe failed; itself for the first; the keyframe for a
             gap).

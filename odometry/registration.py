@@ -1,18 +1,12 @@
 """Scan-to-scan registration by phase correlation (PhaRaO-style), as pure functions.
 
-`register(ref, cur, cfg)` returns the pose of `cur` in the frame of `ref` (dx, dy [m], dyaw
-[rad]; x forward, y left, yaw CCW) with a covariance and a quality flag:
-
-1. Each scan is conditioned once (`preprocess_polar`) into a `PreparedScan`, rendered as windowed
-   Cartesian images (a wide, coarse level; a near, fine level), de-skewed to its mid-sweep pose
-   when it has a velocity; `register_images` registers the image frames and `register` moves the
-   result to the scans' reference times.
-2. Rotation: Fourier-Mellin on the coarse spectra (`odometry.rotation`), known modulo pi.
-3. Translation: `cur` is re-rendered turned into `ref`'s orientation; both half-turn hypotheses
-   are phase correlated on the coarse level and the stronger peak wins; the rotation is refined on
-   a polar grid; the fine level refines the translation near the coarse peak to sub-pixel.
-4. Quality: peak-to-noise ratios and coarse/fine agreement decide `ok`; the covariance comes from
-   the peaks' widths and heights.
+`register(ref, cur, cfg)`: the pose of `cur` in `ref`'s frame (dx, dy [m], dyaw [rad]; x forward,
+y left, yaw CCW) between the scans' reference times, from `register_images` between their
+de-skewed image frames (`PreparedScan`). Rotation by Fourier-Mellin on the coarse level (modulo
+pi, `odometry.rotation`); `cur` re-rendered turned into `ref`'s orientation and both half turns
+phase correlated on the coarse level; the rotation refined on a polar grid; the translation
+refined on the fine level. Peak qualities and coarse/fine agreement decide `ok`; the covariance
+comes from the peaks' widths and heights.
 """
 
 from __future__ import annotations

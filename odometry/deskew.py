@@ -1,14 +1,10 @@
-"""Motion-distortion correction for a spinning radar under constant velocity.
+"""Motion-distortion correction for a spinning radar under constant velocity, and SE(2) twists.
 
-A sweep takes about 250 ms, so each azimuth sees the world from a different pose. With the
-sensor's body velocity (twist) constant over the sweep, the pose at time tau after the scan's
-reference time is, to first order, S(tau) = (vx tau, vy tau, w tau) in the reference frame; a
-point q (reference frame) was measured by the azimuth swept at time tau(q) at p = S(tau)^-1 q.
-
-`sampling_maps` folds this into the backward warp: for every Cartesian pixel q it returns the
-polar (bin, row) where the scan recorded q, so one remap yields the de-skewed image. Range is
-exact for the displacement, bearing to second order, the rotation during the sweep to first
-order; errors stay below a centimetre beyond 10 m at 10 m/s.
+Each azimuth of a sweep (about 250 ms) sees the world from a different pose: at time tau after
+the reference time, to first order S(tau) = (vx tau, vy tau, w tau); a point q was measured at
+p = S(tau)^-1 q. `sampling_maps` folds this into the backward warp (the polar bin and row where
+the scan recorded each Cartesian pixel), so one remap yields the de-skewed image: range exact
+for the displacement, bearing to second order; below a centimetre beyond 10 m at 10 m/s.
 """
 
 from __future__ import annotations
@@ -39,26 +35,13 @@ def sampling_maps(
     twist: NDArray[np.float64] | None = None,
     timing: tuple[float, float] | None = None,
 ) -> tuple[FloatImage, FloatImage]:
-    """Polar sampling maps of a rotated, de-skewed backward warp.
-
-    Args:
-        x_m, y_m: (H, W) coordinates of each output pixel [m] (x forward, y left).
-        range_m: (H, W) range of each output pixel from the sensor [m].
-        bearing_rad: (H, W) bearing of each output pixel [rad], CCW from +x.
-        first_azimuth_rad: azimuth of polar row 0 [rad].
-        azimuth_step_rad: signed azimuth step between rows [rad]; rows cover one full turn.
-        n_azimuths: number of polar rows.
-        bin_size_m: polar bin size [m]; bin k is centred at (k + 0.5) * bin_size_m.
-        rotation_rad: the scan is rendered rotated by this angle: output bearing b shows the
-            scan's bearing b - rotation_rad.
-        twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) in the scan's own frame, or
-            None for no de-skew.
-        timing: (time of row 0, row period) [s] relative to the scan's reference time, or None
-            (no de-skew).
-
-    Returns:
-        (bins, rows) float32 maps of shape (H, W) for `raplace.warp.remap`; rows in [0, n].
-    """
+    """(bins, rows) float32 maps (H, W) for `raplace.warp.remap` (rows in [0, n]) of output
+    pixels at (x, y, range [m], bearing [rad] CCW from +x) (H, W), for a scan of `n_azimuths`
+    rows from `first_azimuth_rad` in signed steps [rad] (one full turn) and bins of
+    `bin_size_m` (bin k centred at (k + 0.5) * bin_size_m), rendered turned by `rotation_rad`
+    (output bearing b shows the scan's b - rotation_rad) and de-skewed with `twist` (3,) (vx, vy
+    [m/s], yaw rate [rad/s]) given `timing` (time of row 0, row period [s] after the reference
+    time); no de-skew when either is None."""
     deskew = False
     t0 = t1 = wx = wy = yaw_rate = 0.0
     if twist is not None and timing is not None and np.any(np.asarray(twist) != 0.0):
@@ -99,11 +82,8 @@ def _maps_kernel(
     x_m, y_m, range_m, bearing_rad, scale, offset, n, inv_n, inv_bin, deskew,
     t0, t1, wx, wy, w2, yaw_rate, bins, rows,
 ):  # type: ignore[no-untyped-def]  # fmt: skip
-    """The maps of `sampling_maps` pixel by pixel, in float32 (compiled; releases the GIL).
-
-    Rows are wrapped by floor, not modulo (slow on float32); rounding can leave -0.0 or exactly
-    n, both valid rows of the seam-wrapped polar image.
-    """
+    """The maps of `sampling_maps` pixel by pixel, in float32. Rows are wrapped by floor (modulo
+    is slow on float32); -0.0 or exactly n are valid rows of the seam-wrapped image."""
     half = np.float32(0.5)
     two = np.float32(2.0)
     zero = np.float32(0.0)
@@ -140,11 +120,8 @@ def _maps_kernel(
 
 
 def twist_from_motion(motion: ArrayLike, dt_s: float) -> NDArray[np.float64]:
-    """The constant body twist (vx, vy [m/s], yaw rate [rad/s]) that moves by `motion` in `dt_s`.
-
-    `motion` is (dx, dy, dyaw), the end pose in the start pose's frame; the SE(2) logarithm is
-    used, so an arc is followed exactly.
-    """
+    """The constant body twist (vx, vy [m/s], yaw rate [rad/s]) that moves by `motion` (dx, dy,
+    dyaw: the end pose in the start pose's frame) in `dt_s` [s] (SE(2) logarithm: exact arcs)."""
     dx, dy, dyaw = (float(v) for v in np.asarray(motion, dtype=np.float64))
     if dt_s <= 0:
         raise ValueError(f"dt_s must be positive, got {dt_s}")

@@ -1,67 +1,63 @@
-"""Which de-skew a new scan keeps: the renderings `Odometry` tries for a scan, each step's choice.
+"""Which de-skew a scan keeps: the re-renderings `Odometry` tries, and the yaw-rate search.
 
-A scan is first rendered at the running velocity without its yaw-rate trend and registered
-(`Odometry.register`). Then, in order, each step below may render it again and register it
-again (seeded with the estimate so far); a new rendering is kept only where the images support
-it (a stronger correlation) or the registration itself measured a different velocity:
-
-- `with_trend`: the yaw-rate trend as a second hypothesis (a turn that goes on tightening);
-- `redeskewed`: the velocity the registration measures, when far from the rendered one (hard
-  braking, a curvature step);
-- `weak_searched`: the yaw rate searched by peak quality when the peak is far weaker than the
-  previous scan's (`odometry.rate_search`);
-- `refreshed`: a new keyframe re-rendered for the scans that will register against it.
-
-Pure functions of the scan, its references (`ScanNode`) and the running `Velocity`; the
-registration is `registration.register_images`.
+Each step renders the scan again and registers it again, seeded with the estimate so far; the
+new rendering is kept where its peak is stronger or the registration measured another velocity:
+`with_trend` (a tightening turn), `redeskewed` (hard braking, a curvature step), `weak_searched`
+(a collapsed peak: the yaw rate searched by peak quality, which peaks where the scan's de-skew
+matches the reference image's; also for loop queries, `searched_registration`), `refreshed` (a
+new keyframe whose de-skew is stale).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import rate_search
 from odometry.config import OdometryConfig
 from odometry.deskew import twist_from_motion
-from odometry.rate_search import Register
-from odometry.reference_time import image_time_ns
-from odometry.registration import MotionEstimate, PreparedScan, register_images
-from odometry.state import ScanNode
+from odometry.history import ScanNode
+from odometry.registration import MotionEstimate, PreparedScan, register, register_images
 from odometry.velocity import (
     REDESKEW_MPS,
     REDESKEW_RADPS,
     Velocity,
     bounded_twist,
     close_twists,
+    image_time_ns,
 )
-from raplace.se2 import between, compose
+from raplace.se2 import between, compose, inverse
 
 FloatArray = NDArray[np.float64]
-YAW_TREND_GAIN = 1.0
-"""Fraction of the yaw-rate trend extrapolated to a time (bounded by the last measured change,
-never across zero; `Velocity.at`): where a turn tightens, a scan de-skewed with the trend
-correlates more strongly, and the images pick (`with_trend`)."""
+Register = Callable[..., MotionEstimate]
+"""`registration.register_images` (passed in so that callers can count the registrations)."""
 Rendered = tuple[PreparedScan, MotionEstimate]
 """A rendering of a scan and its registration against the reference."""
+YAW_TREND_GAIN = 1.0
+"""Fraction of the bounded yaw-rate trend (`Velocity.at`) in the second de-skew hypothesis."""
+WEAK_PEAK_FRACTION = 0.5
+"""A peak below this fraction of the previous scan's has its de-skew yaw rate searched (a de-skew
+far off collapses the peak; the real drive's peaks change by tens of per cent per scan)."""
+HALF_WIDTH_DPS = 16.0
+"""The search tries the yaw rate -+ this [deg/s], then the parabola's vertex (about the error of
+a yaw rate interpolated across a second of a junction turn)."""
+MIN_GAIN = 0.05
+"""A searched de-skew is kept only when its peak is stronger by more than this fraction."""
+LOW_RATE_INTERVAL_S = 0.75
+"""Loop queries are searched when their twist is interpolated over at least this long [s]."""
+MAX_VERTEX_STEPS = 3.0
+"""The parabola's vertex is tried at most this many half-widths from the kept yaw rate ..."""
+MIN_VERTEX_OFFSET = 0.25
+"""... and only when it is at least this many half-widths from every point already tried."""
 
 
 def expected_twist(
     velocity: Velocity, time_ns: int, cfg: OdometryConfig, trend: bool = True
 ) -> FloatArray:
-    """(3,) the running twist expected at `time_ns` [ns] (with the bounded yaw-rate trend, or
-    constant without `trend`), within the plausible speed and yaw rate."""
-    gain = YAW_TREND_GAIN if trend else 0.0
-    return bounded_twist(velocity.at(time_ns, gain), cfg)
-
-
-def measured_twist(
-    reference: ScanNode, base: ScanNode, estimate: MotionEstimate, interval_s: float
-) -> FloatArray:
-    """(3,) the twist that moves `base`'s image frame to the one `estimate` places against
-    `reference`, over `interval_s` [s]."""
-    image_pose = compose(reference.image_pose, estimate.motion)
-    return twist_from_motion(between(base.image_pose, image_pose), interval_s)
+    """(3,) the running twist at `time_ns` [ns], with the bounded yaw-rate trend unless not
+    `trend`, within the plausible speed and yaw rate."""
+    return bounded_twist(velocity.at(time_ns, YAW_TREND_GAIN if trend else 0.0), cfg)
 
 
 def with_trend(
@@ -72,9 +68,8 @@ def with_trend(
     cfg: OdometryConfig,
     register: Register = register_images,
 ) -> Rendered:
-    """`scan` (de-skewed at constant velocity) and its estimate, or the scan de-skewed with
-    the yaw-rate trend and its registration (seeded with the first) when that correlates
-    more strongly; nothing is tried when the trend hardly changes the twist."""
+    """`scan` and its estimate, or the scan de-skewed with the yaw-rate trend when that
+    correlates more strongly (not tried when the trend hardly changes the twist)."""
     if scan.twist is None or velocity is None:
         return scan, estimate
     trend = expected_twist(velocity, image_time_ns(scan), cfg)
@@ -96,26 +91,19 @@ def redeskewed(
     cfg: OdometryConfig,
     register: Register = register_images,
 ) -> Rendered:
-    """The scan and its estimate (`rendered`), re-rendered and re-registered when the velocity
-    it was de-skewed with is far from the one its registration measures since `base`
-    (`interval_s` [s] before; a step of the velocity: hard braking, a curvature step at a
-    junction; a stale velocity bends the image). The re-registration is seeded with the first
-    estimate."""
+    """`rendered`, or the scan re-rendered at the velocity its registration measures since
+    `base` (`interval_s` [s] before) when that is far from the one it was de-skewed with."""
     scan, estimate = rendered
     if scan.twist is None or velocity is None or interval_s <= 0:
         return rendered
-    measured = bounded_twist(measured_twist(reference, base, estimate, interval_s), cfg)
+    image_pose = compose(reference.image_pose, estimate.motion)
+    measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
+    measured = bounded_twist(measured, cfg)
     if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
         return rendered
     again = PreparedScan(scan.polar, measured, cfg)
     redone = register(reference.scan, again, cfg, hint=estimate.motion)
     return (again, redone) if redone.ok else rendered
-
-
-WEAK_PEAK_FRACTION = 0.5
-"""A registration whose peak is below this fraction of the previous scan's has its de-skew yaw
-rate searched: a de-skew far off (through a yaw-rate reversal between two scans, at 2 Hz) shows
-as a peak that collapses, where the real drive's peaks change by tens of per cent per scan."""
 
 
 def weak_searched(
@@ -125,9 +113,8 @@ def weak_searched(
     cfg: OdometryConfig,
     register: Register = register_images,
 ) -> Rendered:
-    """The scan and its estimate (`rendered`), or, when its peak is below `WEAK_PEAK_FRACTION` of
-    the previous scan's `last_quality`, the scan de-skewed at the yaw rate one round of
-    `rate_search.searched` finds (when that correlates more strongly)."""
+    """`rendered`, or, when its peak is below `WEAK_PEAK_FRACTION` of the previous scan's
+    `last_quality`, the scan at the yaw rate `searched` finds."""
     scan, estimate = rendered
     if (
         scan.twist is None
@@ -135,15 +122,86 @@ def weak_searched(
         or estimate.quality >= WEAK_PEAK_FRACTION * last_quality
     ):
         return rendered
-    return rate_search.searched(reference.scan, scan, estimate, cfg, register)
+    return searched(reference.scan, scan, estimate, cfg, register)
 
 
 def refreshed(scan: PreparedScan, velocity: Velocity | None, cfg: OdometryConfig) -> PreparedScan:
-    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans);
-    `scan` itself where nothing would change."""
+    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans)."""
     if velocity is None or not cfg.deskew or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
     if scan.twist is not None and close_twists(new, scan.twist):
         return scan
     return PreparedScan(scan.polar, new, cfg)
+
+
+def vertex_offset(qualities: tuple[float, float, float]) -> float | None:
+    """Where the parabola through peak qualities at offsets -1, 0, +1 (half-widths) peaks,
+    within +-`MAX_VERTEX_STEPS`; None when it opens upwards or is next to a point tried."""
+    low, mid, high = qualities
+    curvature = low - 2.0 * mid + high
+    if curvature >= 0.0:
+        return None
+    offset = float(np.clip(0.5 * (low - high) / curvature, -MAX_VERTEX_STEPS, MAX_VERTEX_STEPS))
+    if min(abs(offset), abs(abs(offset) - 1.0)) <= MIN_VERTEX_OFFSET:
+        return None
+    return offset
+
+
+def searched(
+    reference: PreparedScan,
+    scan: PreparedScan,
+    estimate: MotionEstimate,
+    cfg: OdometryConfig,
+    register: Register,
+) -> Rendered:
+    """`scan` and its registration `estimate` against `reference`, or the scan de-skewed at the
+    yaw rate -+ `HALF_WIDTH_DPS` or the parabola's vertex (2-3 registrations, seeded with
+    `estimate`) whose peak is stronger by more than `MIN_GAIN`."""
+    assert scan.twist is not None
+    base_twist = scan.twist
+
+    def tried(offset: float) -> Rendered:
+        twist = base_twist.copy()
+        twist[2] += offset * np.deg2rad(HALF_WIDTH_DPS)
+        again = PreparedScan(scan.polar, bounded_twist(twist, cfg), cfg)
+        return again, register(reference, again, cfg, hint=estimate.motion)
+
+    candidates = [tried(-1.0), (scan, estimate), tried(1.0)]
+    qualities = tuple(e.quality if e.ok else 0.0 for _, e in candidates)
+    offset = vertex_offset((qualities[0], qualities[1], qualities[2]))
+    if offset is not None:
+        candidates.append(tried(offset))
+    found_scan, found = max(
+        (c for c in candidates if c[1].ok), key=lambda c: c[1].quality, default=(scan, estimate)
+    )
+    if found.quality <= (1.0 + MIN_GAIN) * estimate.quality:
+        return scan, estimate
+    return found_scan, found
+
+
+def searched_registration(
+    query: PreparedScan,
+    match: PreparedScan,
+    estimate: MotionEstimate,
+    cfg: OdometryConfig,
+    twist_span_s: float | None,
+) -> MotionEstimate:
+    """`estimate` (`register(query, match, cfg)`), or the registration with `query` de-skewed at
+    a searched yaw rate when that correlates more strongly; only for a query twist interpolated
+    over `twist_span_s` [s] of at least `LOW_RATE_INTERVAL_S` and a valid `estimate`."""
+    if (
+        query.twist is None
+        or twist_span_s is None
+        or twist_span_s < LOW_RATE_INTERVAL_S
+        or not estimate.ok
+    ):
+        return estimate
+    swapped = register(match, query, cfg, inverse(estimate.motion))
+    if not swapped.ok:
+        return estimate
+    found, _ = searched(match, query, swapped, cfg, register)
+    if found is query:
+        return estimate
+    again = register(found, match, cfg, estimate.motion)
+    return again if again.ok and again.quality > estimate.quality else estimate

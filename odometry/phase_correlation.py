@@ -1,12 +1,15 @@
-"""Phase correlation with a smooth, sub-pixel-locatable peak and a peak quality measure.
+"""Phase correlation on packed spectra, with a smooth, sub-pixel-locatable peak and its quality.
 
-The normalised cross-power spectrum of two packed spectra (`odometry.packed`) is multiplied by a
-Gaussian low-pass, which convolves the correlation surface with a Gaussian of `smoothing_px`:
-the peak of a pure shift becomes a sampled Gaussian, whose log a quadratic fit on the 3 x 3
-neighbourhood locates to a small fraction of a pixel, also giving its curvature.
+Packed spectra are OpenCV's CCS layout (`cv2.dft` of a real (H, W) float32 image, H and W even):
+columns 1 .. W - 2 hold (Re, Im) pairs of the column frequencies 1 .. W / 2 - 1; columns 0 and
+W - 1 hold the real values of row frequencies 0 (row 0) and H / 2 (row H - 1) and the (Re, Im)
+pairs of row frequencies 1 .. H / 2 - 1 in rows (2 k - 1, 2 k). Half the memory of a complex
+spectrum.
 
-Shift convention: `correlate(f_ref, f_mov)` peaks at d (rows, cols) when mov(p) = ref(p - d), i.e.
-when the content of `mov` is that of `ref` moved by +d pixels.
+The normalised cross-power spectrum is multiplied by a Gaussian low-pass, so the peak of a pure
+shift is a sampled Gaussian whose log a quadratic fit on its 3 x 3 neighbourhood locates to a
+small fraction of a pixel. `correlate(f_ref, f_mov)` peaks at d (rows, cols) when
+mov(p) = ref(p - d).
 """
 
 from __future__ import annotations
@@ -15,15 +18,13 @@ import functools
 import math
 from dataclasses import dataclass
 
+import cv2
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.packed import PackedSpectrum, forward, inverse, pack
-
-__all__ = ["PackedSpectrum", "correlate", "forward", "locate_peak"]
-
 FloatImage = NDArray[np.float32]
+PackedSpectrum = NDArray[np.float32]
 SPECTRUM_EPS = 1e-12
 """Added to spectral magnitudes before whitening (avoids 0 / 0 on empty frequencies)."""
 TINY = 1e-30
@@ -37,25 +38,56 @@ PEAK_EXCLUSION_SIGMAS = 4.0
 """The noise level is measured outside this many smoothing widths around the peak."""
 
 
+def forward(image: FloatImage) -> PackedSpectrum:
+    """Packed spectrum (H, W) float32 of a real (H, W) float32 image (H, W even, >= 4)."""
+    shape = image.shape
+    if len(shape) != 2 or shape[0] % 2 or shape[1] % 2 or min(shape) < 4:
+        raise ValueError(f"packed spectra need a 2-D image with even sides >= 4, got {shape}")
+    return np.asarray(cv2.dft(np.ascontiguousarray(image, dtype=np.float32)), dtype=np.float32)
+
+
+def inverse(packed: PackedSpectrum) -> FloatImage:
+    """The real image (H, W) float32 of a packed spectrum, unscaled (H W times the image whose
+    `forward` it is)."""
+    return np.asarray(cv2.idft(packed, flags=cv2.DFT_REAL_OUTPUT), dtype=np.float32)
+
+
+def pack(half: NDArray[np.complexfloating]) -> PackedSpectrum:
+    """The packed spectrum (H, W) of a half spectrum (H, W // 2 + 1) (`numpy.fft.rfft2`'s); the
+    imaginary parts at the four real positions are dropped."""
+    h, w = half.shape[0], 2 * (half.shape[1] - 1)
+    out = np.empty((h, w), dtype=np.float32)
+    out[:, 1 : w - 1 : 2] = half[:, 1 : w // 2].real
+    out[:, 2 : w - 1 : 2] = half[:, 1 : w // 2].imag
+    for col, k in ((0, 0), (w - 1, w // 2)):
+        column = half[:, k]
+        out[0, col] = column[0].real
+        out[1 : h - 1 : 2, col] = column[1 : h // 2].real
+        out[2 : h - 1 : 2, col] = column[1 : h // 2].imag
+        out[h - 1, col] = column[h // 2].real
+    return out
+
+
+def forward_rows(image: FloatImage) -> PackedSpectrum:
+    """Packed spectra (rows, n) float32 of every row of a real (rows, n) image: per row Re(0),
+    (Re, Im) pairs of the frequencies 1 .. (n - 1) // 2, then Re(n / 2) when n is even."""
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    return np.asarray(cv2.dft(image, flags=cv2.DFT_ROWS), dtype=np.float32)
+
+
 @dataclass(frozen=True)
 class Peak:
-    """A located correlation peak.
-
-    Attributes:
-        shift_px: (2,) sub-pixel shift (rows, cols) [pixels], wrapped to [-H/2, H/2).
-        quality: peak-to-noise ratio: the surface at the integer peak over the standard
-            deviation of the surface away from the peak (about 3-5 for noise alone).
-        curvature: (2, 2) negative Hessian of the log surface at the peak [1/pixel^2] (positive
-            definite for a proper peak).
-    """
+    """A located correlation peak: its sub-pixel shift (2,) (rows, cols) [pixels] wrapped to
+    [-H/2, H/2), its quality (the surface at the integer peak over the standard deviation away
+    from it; about 3-5 for noise alone) and the (2, 2) negative Hessian of the log surface
+    [1/pixel^2] (positive definite for a proper peak)."""
 
     shift_px: NDArray[np.float64]
     quality: float
     curvature: NDArray[np.float64]
 
     def covariance_px(self) -> NDArray[np.float64]:
-        """(2, 2) covariance [pixel^2] of `shift_px`: the fitted Gaussian peak's covariance
-        inv(curvature) (its width squared) over the squared peak-to-noise ratio."""
+        """(2, 2) covariance [pixel^2] of `shift_px`: inv(curvature) over the squared quality."""
         (a, b), (_, c) = self.curvature
         if not 0.5 * (a + c) - math.hypot(0.5 * (a - c), b) > MIN_CURVATURE:
             cov = np.eye(2) * WIDE_PEAK_VARIANCE_PX2
@@ -66,8 +98,8 @@ class Peak:
 
 @functools.lru_cache(maxsize=16)
 def _packed_lowpass(shape: tuple[int, int], sigma_px: float) -> PackedSpectrum:
-    """Weights that convolve a surface of `shape` with a Gaussian of `sigma_px` [pixels], at
-    every packed position (both of a pair), times 1 / (H W) (the unscaled inverse DFT's)."""
+    """Packed weights that convolve a surface of `shape` with a Gaussian of `sigma_px` [pixels],
+    times 1 / (H W) (the unscaled inverse DFT's)."""
     fy = np.fft.fftfreq(shape[0])[:, None]
     fx = np.fft.rfftfreq(shape[1])[None, :]
     weights = np.exp(-2.0 * (np.pi * sigma_px) ** 2 * (fy * fy + fx * fx)).astype(np.float32)
@@ -79,8 +111,8 @@ def _packed_lowpass(shape: tuple[int, int], sigma_px: float) -> PackedSpectrum:
 
 @functools.lru_cache(maxsize=4)
 def _packed_half_turn_ramp(size_px: int) -> PackedSpectrum:
-    """exp(2 pi i (k_r + k_c) / n), packed: the spectrum of a square image turned by pi is this
-    times its conjugate spectrum (the grid is centred between pixels)."""
+    """exp(2 pi i (k_r + k_c) / n), packed: a square image turned by pi has this times its
+    conjugate spectrum (the grid is centred between pixels)."""
     k_r = np.fft.fftfreq(size_px)[:, None]
     k_c = np.fft.rfftfreq(size_px)[None, :]
     packed = pack(np.exp(2j * np.pi * (k_r + k_c)).astype(np.complex64))
@@ -95,14 +127,9 @@ def correlate(
     smoothing_px: float,
     half_turn: bool = False,
 ) -> FloatImage:
-    """Phase-correlation surface (H, W) float32 of two packed spectra of images of `shape`.
-
-    Args:
-        f_ref, f_mov: packed spectra (`forward`) of the reference and moved images.
-        shape: (H, W) of the images.
-        smoothing_px: Gaussian width of the peak [pixels].
-        half_turn: correlate with the moved image turned by pi (square images only).
-    """
+    """Phase-correlation surface (H, W) float32 of the packed spectra of two images of `shape`
+    (the moved one turned by pi with `half_turn`, square images only); peak width
+    `smoothing_px` [pixels]."""
     weights = _packed_lowpass(shape, float(smoothing_px))
     ramp = _packed_half_turn_ramp(shape[0]) if half_turn else weights
     cross = np.empty(shape, dtype=np.float32)
@@ -112,12 +139,8 @@ def correlate(
 
 @numba.njit(nogil=True, cache=True)
 def _cross_power_kernel(ref, mov, weights, ramp, half_turn, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out = weights * C / (|C| + eps) with C = mov * conj(ref) (mov replaced by ramp *
-    conj(mov) for a half turn), on packed spectra, in float32.
-
-    The (Re, Im) pairs lie along the rows in the inner columns and down the two edge columns
-    (their paired rows); the four remaining values are real.
-    """
+    """out = weights * C / (|C| + eps), C = mov * conj(ref) (mov replaced by ramp * conj(mov)
+    for a half turn), on packed spectra, in float32."""
     h, w = out.shape
     zero = np.float32(0.0)
     for i in range(h):
@@ -156,16 +179,10 @@ def locate_peak(
     center_px: tuple[float, float] | None = None,
     radius_px: float | None = None,
 ) -> Peak:
-    """Find the peak of a (periodic) correlation surface, to sub-pixel precision.
-
-    Args:
-        surface: (H, W) correlation surface; index (i, j) stands for the shift (i, j) mod (H, W).
-        smoothing_px: the peak's Gaussian width [pixels] (sets the noise exclusion zone).
-        center_px, radius_px: restrict the search to shifts within `radius_px` (Chebyshev) of
-            `center_px` (rows, cols); None searches everywhere.
-
-    The noise is the standard deviation of the surface outside a band of rows around the peak.
-    """
+    """The sub-pixel peak of a periodic (H, W) correlation surface (index (i, j): the shift
+    (i, j) mod (H, W)), within `radius_px` (Chebyshev) of `center_px` (rows, cols) when given;
+    the noise is the surface's standard deviation outside a band of rows about the peak, its
+    half-width set by the peak width `smoothing_px` [pixels]."""
     h, w = surface.shape
     if center_px is None or radius_px is None:
         i0, j0 = divmod(int(np.argmax(surface)), w)
@@ -189,10 +206,9 @@ def locate_peak(
 
 @numba.njit(nogil=True, cache=True)
 def _fit_log_quadratic(surface, i0, j0, floor):  # type: ignore[no-untyped-def]  # fmt: skip
-    """(d_row, d_col, c_rr, c_rc, c_cc): the sub-pixel offset (clipped to +-1) and the
-    curvature (negative Hessian) of a quadratic through the log of the 3 x 3 neighbourhood of
-    (i0, j0) (values floored at `floor`); a zero offset when the curvature is not positive
-    definite."""
+    """(d_row, d_col, c_rr, c_rc, c_cc): offset (clipped to +-1; 0 unless the curvature is
+    positive definite) and negative Hessian of a quadratic through the log of the 3 x 3
+    neighbourhood of (i0, j0) (values floored at `floor`)."""
     h, w = surface.shape
     logp = np.empty((3, 3))
     for a in range(3):
@@ -218,8 +234,8 @@ def _fit_log_quadratic(surface, i0, j0, floor):  # type: ignore[no-untyped-def] 
 
 @numba.njit(nogil=True, cache=True, fastmath={"reassoc", "contract"})  # vectorised sums
 def std_outside_rows(surface, i0, exclude):  # type: ignore[no-untyped-def]  # fmt: skip
-    """Standard deviation (float64) of the (H, W) surface without the rows within `exclude` of
-    row i0 (periodic); 0 when nothing is left."""
+    """Standard deviation of the (H, W) surface without the rows within `exclude` of row i0
+    (periodic); 0 when nothing is left."""
     h, w = surface.shape
     total = 0.0
     total_sq = 0.0

@@ -1,13 +1,10 @@
 """Scan conditioning: polar filtering, then windowed Cartesian images for phase correlation.
 
-1. `preprocess_polar(scan, cfg) -> PolarScan`: azimuth rows resampled onto a uniform sweep when
-   needed, range bins averaged down to about `bin_size_m` (speckle), each range bin's median over
-   azimuths subtracted (ring noise: constant-range bands that do not move with the vehicle and
-   would pull phase correlation toward zero motion), an optional per-azimuth noise floor, the
-   saturated near range zeroed.
-2. `render_cartesian(polar, level, rotation_rad, twist)`: the backward-warped image of a
-   `CartesianLevel` (image convention of `raplace.warp`), optionally rotated and de-skewed
-   (`odometry.deskew`), times the level's radial apodisation window.
+`preprocess_polar` resamples the rows onto a uniform sweep when needed, averages range bins down
+to about `bin_size_m` (speckle), subtracts each range bin's median over azimuths (ring noise:
+bands that do not move with the vehicle pull phase correlation toward zero motion), an optional
+per-azimuth noise floor, and zeroes the saturated near range. `render_cartesian` makes the
+backward-warped, rotated and de-skewed image of a `CartesianLevel` times its apodisation window.
 """
 
 from __future__ import annotations
@@ -40,11 +37,7 @@ FloatImage = NDArray[np.float32]
 
 @dataclass(frozen=True)
 class RowTiming:
-    """Linear acquisition-time model of a `PolarScan`'s rows, relative to its reference time.
-
-    Row i was measured at `first_row_s + i * row_period_s` seconds after the scan's timestamp
-    (negative before it).
-    """
+    """Row i was measured `first_row_s + i * row_period_s` [s] after the scan's reference time."""
 
     first_row_s: float
     row_period_s: float
@@ -56,7 +49,7 @@ class PolarScan:
 
     Attributes:
         wrapped_image: (n_azimuths + 1, n_bins) float32 `image` with row 0 repeated at the end
-            (`raplace.warp`'s seam layout, for its many renders).
+            (`raplace.warp`'s seam layout).
         first_azimuth_rad: azimuth of row 0 [rad].
         azimuth_step_rad: signed step between rows [rad]; n_azimuths * |step| = 2 pi.
         bin_size_m: range bin size [m].
@@ -84,9 +77,8 @@ class PolarScan:
 
     @property
     def mid_sweep_s(self) -> float | None:
-        """Mean acquisition time of the rows relative to the reference time [s] (None without
-        azimuth times): the time whose pose a scan de-skewed to it depends least on the velocity
-        used."""
+        """Mean acquisition time of the rows after the reference time [s] (None without azimuth
+        times)."""
         if self.timing is None:
             return None
         return self.timing.first_row_s + 0.5 * (self.n_azimuths - 1) * self.timing.row_period_s
@@ -94,12 +86,8 @@ class PolarScan:
 
 @dataclass(frozen=True)
 class CartesianLevel:
-    """Cached per-pixel polar geometry and window of one Cartesian image level.
-
-    Pixel (r, c) of the `grid` (see `raplace.warp`) has range `range_m[r, c]` and bearing
-    `bearing_rad[r, c]` (CCW from +x) from the sensor at the image centre. All arrays are
-    (size_px, size_px) float32.
-    """
+    """Per-pixel (x, y, range [m], bearing [rad] CCW from +x) from the sensor at the centre of
+    a `raplace.warp` grid, and its apodisation window; arrays (size_px, size_px) float32."""
 
     grid: CartesianGrid
     x_m: FloatImage
@@ -114,32 +102,23 @@ class CartesianLevel:
 
 
 TAPER_FRACTION = 0.3
-"""The radial apodisation window falls from 1 to 0 over this outer fraction of an image's
-inscribed radius: wide enough to keep the image border out of the spectrum, narrow enough to
-keep most of the scene."""
+"""The radial window falls from 1 to 0 over this outer fraction of the inscribed radius (keeps the
+image border out of the spectrum and most of the scene in)."""
 
 
 @functools.lru_cache(maxsize=8)
-def cartesian_level(
-    cell_m: float, size_px: int, taper_fraction: float = TAPER_FRACTION
-) -> CartesianLevel:
-    """The geometry and apodisation window of a level of `size_px` (even) pixels of `cell_m`
-    [m] a side (cached).
-
-    The window is a radial Tukey window: 1 up to (1 - taper_fraction) of the inscribed radius,
-    then a cosine fall to 0 at the inscribed radius, 0 in the corners.
-    """
+def cartesian_level(cell_m: float, size_px: int) -> CartesianLevel:
+    """The level of `size_px` (even) pixels of `cell_m` [m] (cached); its window is a radial
+    Tukey window (`TAPER_FRACTION`), 0 in the corners."""
     if size_px < 8 or size_px % 2 or cell_m <= 0:
         raise OdometryError(
             f"a level needs an even size_px >= 8 and cell_m > 0, got {size_px}, {cell_m}"
         )
-    if not 0.0 < taper_fraction <= 1.0:
-        raise OdometryError(f"taper_fraction must be in (0, 1], got {taper_fraction}")
     grid = CartesianGrid(cell_m=cell_m, size_px=size_px)
     x, y = grid.pixel_centres()
     rng = np.hypot(x, y)
     outer = grid.half_extent_m
-    inner = (1.0 - taper_fraction) * outer
+    inner = (1.0 - TAPER_FRACTION) * outer
     fall = np.clip((rng - inner) / (outer - inner), 0.0, 1.0)
     window = 0.5 * (1.0 + np.cos(np.pi * fall))
     return CartesianLevel(
@@ -153,11 +132,8 @@ def cartesian_level(
 
 
 def _uniform_sweep(azimuths_rad: NDArray[np.float64]) -> tuple[float, float, NDArray[np.float64]]:
-    """Fit a uniform full-turn sweep to the azimuths.
-
-    Returns (first azimuth [rad], signed step [rad], fractional source row of each uniform row);
-    the source rows are simply 0..n-1 when the scan already is uniform.
-    """
+    """(first azimuth [rad], signed step [rad], fractional source row of each uniform row) of a
+    uniform full-turn sweep fitted to the azimuths (rows 0..n-1 when already uniform)."""
     az = np.unwrap(np.asarray(azimuths_rad, dtype=np.float64))
     n = len(az)
     direction = 1.0 if az[-1] > az[0] else -1.0
@@ -179,7 +155,7 @@ def _uniform_sweep(azimuths_rad: NDArray[np.float64]) -> tuple[float, float, NDA
 
 
 def _row_timing(scan: Scan, source_rows: NDArray[np.float64]) -> RowTiming | None:
-    """Least-squares linear time model of the (uniform) rows, or None without azimuth times."""
+    """Least-squares linear time model of the uniform rows (None without azimuth times)."""
     times = scan.azimuth_times_ns
     if times is None:
         return None
@@ -198,14 +174,7 @@ def _row_timing(scan: Scan, source_rows: NDArray[np.float64]) -> RowTiming | Non
 
 
 def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
-    """Condition a raw polar scan for Cartesian rendering.
-
-    Args:
-        scan: the raw scan (`polar` (n_azimuths, n_bins) uint8, CCW azimuths [rad]).
-        cfg: preprocessing settings.
-
-    Returns:
-        The conditioned scan on uniform azimuths with bins of about `cfg.bin_size_m`.
+    """The raw scan conditioned on uniform azimuths with bins of about `cfg.bin_size_m`.
 
     Raises:
         OdometryError: inconsistent shapes, dtype or geometry.
@@ -268,9 +237,9 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
 
 @numba.njit(nogil=True, cache=True, fastmath={"reassoc", "contract"})  # vectorised sums
 def _condition_rows(source, scale, ring, near, floor_sigmas, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out = source * scale - ring (n_bins,) per row, float32; then, when `floor_sigmas` >= 0,
-    minus each row's noise floor (mean + floor_sigmas standard deviations of its bins from
-    `near` on, accumulated in float64); clipped at 0, the bins before `near` zeroed."""
+    """out = source * scale - ring per row, minus (when `floor_sigmas` >= 0) the row's mean +
+    floor_sigmas standard deviations of its bins from `near` on; clipped at 0, bins before
+    `near` zeroed (float32)."""
     n_rows, n_bins = out.shape
     count = n_bins - near
     for i in range(n_rows):
@@ -295,8 +264,8 @@ def _condition_rows(source, scale, ring, near, floor_sigmas, out):  # type: igno
 
 
 def _block_sums(polar: NDArray[np.uint8], factor: int) -> NDArray[np.unsignedinteger]:
-    """(n_azimuths, n_bins / factor) exact integer sums of `factor` adjacent bins (n_bins a
-    multiple of factor); several times faster than a float area resize, which their means equal."""
+    """(n_azimuths, n_bins / factor) exact integer sums of `factor` adjacent bins (faster than a
+    float area resize, which their means equal)."""
     sums = polar[:, ::factor].astype(np.uint16 if factor <= MAX_UINT16_SUM_FACTOR else np.uint32)
     for k in range(1, factor):
         sums += polar[:, k::factor]
@@ -305,8 +274,7 @@ def _block_sums(polar: NDArray[np.uint8], factor: int) -> NDArray[np.unsignedint
 
 @numba.njit(nogil=True, cache=True)
 def _column_order_statistic(values, rank, levels):  # type: ignore[no-untyped-def]  # fmt: skip
-    """(n_cols,) the `rank`-th smallest value of each column of `values` (n_rows, n_cols), all
-    below `levels`: `np.partition(values, rank, axis=0)[rank]` by counting (linear time)."""
+    """`np.partition(values, rank, axis=0)[rank]` by counting, for values below `levels`."""
     n_rows, n_cols = values.shape
     out = np.empty_like(values[0])
     counts = np.zeros(levels, dtype=np.int32)
@@ -333,23 +301,10 @@ def sample_scan(
     twist: NDArray[np.float64] | None = None,
     time_offset_s: float = 0.0,
 ) -> FloatImage:
-    """Sample a conditioned scan at arbitrary points (bilinear, 0 beyond its range).
-
-    Args:
-        polar: the conditioned scan.
-        x_m, y_m, range_m, bearing_rad: (H, W) the points [m, rad] in a frame centred on the
-            sensor at the de-skew time (the scan's reference time + `time_offset_s`), turned by
-            `rotation_rad` from the scan's frame.
-        rotation_rad: the scan appears rotated by this angle [rad] (CCW): a return at bearing b in
-            the scan's frame is sampled at bearing b + rotation_rad.
-        twist: (3,) body velocity (vx [m/s], vy [m/s], yaw rate [rad/s]) of the sensor during the
-            sweep, for de-skewing; None (or a scan without times) samples the scan as measured.
-        time_offset_s: the scan is de-skewed to the sensor pose at this time after its reference
-            time [s] (negative: before); ignored without de-skewing.
-
-    Returns:
-        (H, W) float32 intensities.
-    """
+    """(H, W) float32 intensities of the scan at points (H, W) [m, rad] of the sensor frame at
+    `time_offset_s` [s] after the reference time, turned by `rotation_rad` (CCW) from the scan's
+    frame (bilinear, 0 beyond range); de-skewed with `twist` (3,) (vx, vy [m/s], yaw rate
+    [rad/s]) when given and the scan has azimuth times."""
     timing = polar.timing
     bins, rows = sampling_maps(
         x_m,
@@ -376,11 +331,8 @@ def render_cartesian(
     twist: NDArray[np.float64] | None = None,
     time_offset_s: float = 0.0,
 ) -> FloatImage:
-    """The windowed Cartesian image (size_px, size_px) float32 of a conditioned scan.
-
-    `rotation_rad`, `twist` and `time_offset_s` as in `sample_scan`; the image is
-    multiplied by the level's apodisation window.
-    """
+    """The level's windowed image (size_px, size_px) float32 of a scan (arguments as in
+    `sample_scan`)."""
     image = sample_scan(
         polar,
         level.x_m,

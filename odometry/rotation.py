@@ -1,15 +1,11 @@
 """Rotation between two scans by Fourier-Mellin, then a refinement on a polar grid.
 
-The magnitude of an image's spectrum ignores translation and turns with the image. Resampled on a
-polar grid (angle x radius), a rotation becomes a shift along the angle axis, found by phase
-correlation along that axis (summed over radii). A real image's magnitude spectrum is symmetric
-under a half turn, so the angle axis spans [0, pi) and the rotation is known modulo pi: the caller
-tests both hypotheses.
-
-Fourier-Mellin alone locks toward zero for small rotations (the pixel grid and the window are
-fixed in both images), so `refine_rotation_against` follows once the translation is known: both
-scans are sampled on one polar grid centred on the reference sensor (`PolarGrid`), the moved one
-through the current motion estimate; the remaining rotation is a pure shift along the angle axis.
+A magnitude spectrum ignores translation and turns with the image; resampled on a polar grid
+(angle x radius) a rotation is a shift along the angle axis, found by phase correlation along it.
+The magnitude is symmetric under a half turn, so the rotation is known modulo pi. Fourier-Mellin
+locks toward zero for small rotations (the pixel grid and window are fixed in both images), so
+`refine_rotation_against` follows once the translation is known: both scans sampled on one
+polar grid about the reference sensor, the remaining rotation a pure shift along the angle.
 """
 
 from __future__ import annotations
@@ -23,7 +19,6 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.packed import PackedSpectrum, forward_rows
 from odometry.phase_correlation import (
     LOG_FLOOR_FRACTION,
     MIN_CURVATURE,
@@ -31,32 +26,29 @@ from odometry.phase_correlation import (
     SPECTRUM_EPS,
     TINY,
     WIDE_PEAK_VARIANCE_PX2,
+    PackedSpectrum,
+    forward_rows,
     std_outside_rows,
 )
 
 Signature = PackedSpectrum
-"""Packed row spectra ((n_radii, n_angles) float32, `odometry.packed.forward_rows`)."""
+"""Packed row spectra ((n_radii, n_angles) float32, `forward_rows`)."""
 
 
 @dataclass(frozen=True)
 class RotationSettings:
-    """Fourier-Mellin rotation settings (internal: `ROTATION`).
+    """Fourier-Mellin rotation settings (internal: `ROTATION`; they follow the image levels).
 
     Attributes:
-        n_angles: samples of the spectrum's angle over [0, pi) (resolution pi / n_angles).
-        n_radii: samples of the spectrum's radius.
-        min_frequency, max_frequency: spectral radii used, as fractions of Nyquist (the lowest
-            frequencies are dominated by the window).
+        n_angles, n_radii: samples of the spectrum's angle over [0, pi) and of its radius.
+        min_frequency, max_frequency: spectral radii used, as fractions of Nyquist.
         smoothing_bins: Gaussian width [angle bins] of the correlation peak.
-        refine: after the coarse translation, refine the rotation on the polar grid about the
-            reference sensor (`refine_rotation_against`).
+        refine: refine the rotation on the polar grid about the reference sensor.
         refine_n_angles: angular samples of that grid over a full turn.
         refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
         refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
-        refine_passes: at most this many refinements in a row, each after the first preceded by
-            a coarse translation at the refined yaw: the first translation is made at the
-            Fourier-Mellin yaw, whose error would otherwise leak into the refined rotation in
-            proportion to the rotation.
+        refine_passes: at most this many refinements, each after the first preceded by a coarse
+            translation at the refined yaw (the first is made at the Fourier-Mellin yaw).
         refine_repeat_min_deg: a refinement is repeated only while its last correction was
             larger than this [deg].
     """
@@ -77,20 +69,13 @@ class RotationSettings:
 
 
 ROTATION = RotationSettings()
-"""The rotation settings the odometry and loop verification use (not a user setting: they
-follow the image levels, not a sensor or a vehicle)."""
 
 
 @dataclass(frozen=True)
 class RotationEstimate:
-    """Rotation of a scan relative to a reference.
-
-    Attributes:
-        angle_rad: rotation [rad]: in [-pi/2, pi/2) from Fourier-Mellin (the other hypothesis
-            is angle_rad + pi), in [-pi, pi) from a refinement.
-        sigma_rad: standard deviation from the correlation peak [rad].
-        quality: peak-to-noise ratio of the angular correlation peak.
-    """
+    """Rotation of a scan relative to a reference: `angle_rad` in [-pi/2, pi/2) from
+    Fourier-Mellin (or + pi), in [-pi, pi) from a refinement; its standard deviation [rad] and
+    peak-to-noise ratio from the angular correlation peak."""
 
     angle_rad: float
     sigma_rad: float
@@ -101,8 +86,7 @@ class RotationEstimate:
 def _sampler(
     size_px: int, cfg: RotationSettings
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """cv2.remap maps (cols, rows) from (radius, angle) to the row-centred half spectrum of a
-    square image."""
+    """cv2.remap maps (cols, rows) from (radius, angle) to a row-centred half spectrum."""
     nyquist = size_px / 2.0
     radii = np.linspace(cfg.min_frequency * nyquist, cfg.max_frequency * nyquist, cfg.n_radii)
     angles = np.arange(cfg.n_angles) * (np.pi / cfg.n_angles)
@@ -112,8 +96,8 @@ def _sampler(
 
 
 def signature(spectrum: PackedSpectrum, cfg: RotationSettings) -> Signature:
-    """Rotation signature of an image from its packed spectrum (size_px, size_px): the packed
-    angular spectra (n_radii, n_angles) float32 of its polar-resampled log magnitude spectrum."""
+    """The packed angular spectra (n_radii, n_angles) of the polar-resampled log magnitude of
+    an image's packed spectrum (size_px, size_px)."""
     size = spectrum.shape[0]
     centred = np.empty((size, size // 2 + 1), dtype=np.float32)
     _centred_log_magnitude(spectrum, centred)
@@ -132,8 +116,8 @@ def _log_magnitude(re, im):  # type: ignore[no-untyped-def]  # fmt: skip
 
 @numba.njit(nogil=True, cache=True)
 def _centred_log_magnitude(packed, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out (h, w // 2 + 1) = log(1 + |half spectrum|) of a packed spectrum (h, w), the rows
-    shifted by half (numpy's fftshift along axis 0), float32."""
+    """out (h, w // 2 + 1) = log(1 + |half spectrum|) of a packed spectrum (h, w), rows
+    fftshifted, float32."""
     h, w = packed.shape
     half = h // 2
     for i in range(h):
@@ -157,10 +141,8 @@ def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationSettings) -> 
 
 @dataclass(frozen=True)
 class PolarGrid:
-    """Points on a polar grid about a sensor: row k at range min_range_m + (k + 0.5) *
-    range_step_m, column j at bearing j * 2 pi / n_angles (CCW from +x). Arrays
-    (n_ranges, n_angles) float32 [m, rad] (the angle along the rows, where the row DFT of
-    `angular_spectrum` needs it)."""
+    """Points of a polar grid about a sensor, (n_ranges, n_angles) float32 [m, rad]: row k at
+    range min_range_m + (k + 0.5) * range_step_m, column j at bearing j * 2 pi / n_angles."""
 
     x_m: NDArray[np.float32]
     y_m: NDArray[np.float32]
@@ -200,26 +182,15 @@ def polar_grid(cfg: RotationSettings) -> PolarGrid:
 
 
 def angular_spectrum(image: NDArray[np.float32]) -> PackedSpectrum:
-    """(n_ranges, n_angles) float32 packed spectra (`forward_rows`) along the angle axis of a
-    scan sampled on a `PolarGrid` ((n_ranges, n_angles) float32), one per range."""
+    """Packed spectra (`forward_rows`) along the angle axis of a scan on a `PolarGrid`."""
     return forward_rows(image)
 
 
 def refine_rotation_against(
     ref_spectrum: PackedSpectrum, mov: NDArray[np.float32], cfg: RotationSettings
 ) -> RotationEstimate:
-    """Residual rotation of `mov` relative to the reference, both sampled on the same
-    `PolarGrid`.
-
-    Args:
-        ref_spectrum: `angular_spectrum` of the reference scan on the grid.
-        mov: (n_ranges, n_angles) the moved scan on the grid, rendered through the current
-            motion estimate (so only a residual rotation remains).
-        cfg: rotation settings.
-
-    Returns:
-        The residual rotation in [-pi, pi) [rad] to add to the estimate's yaw.
-    """
+    """The residual rotation [rad] to add to the estimate's yaw, of `mov` (the moved scan on
+    the grid through the current estimate) against the reference's `angular_spectrum`."""
     n = mov.shape[1]
     curve = correlate_1d(ref_spectrum, angular_spectrum(mov), n, cfg.refine_smoothing_bins)
     return _rotation_of_peak(curve, cfg.refine_smoothing_bins, 2.0 * np.pi / n)
@@ -228,14 +199,10 @@ def refine_rotation_against(
 def _rotation_of_peak(
     curve: NDArray[np.float64], smoothing: float, step_rad: float
 ) -> RotationEstimate:
-    """The rotation at the peak of an angular correlation (`correlate_1d`, samples `step_rad`
-    apart, peak width `smoothing` samples), located by a parabola through the log of its 3 top
-    samples.
-
-    The angle is minus the correlation's shift: in a signature the spectrum's angle runs from the
-    row- toward the column-frequency axis, against a CCW turn in the image convention; on a
-    `PolarGrid` content d samples further CCW was rendered turned too far by d.
-    """
+    """The rotation at the peak of an angular correlation (samples `step_rad` apart, peak width
+    `smoothing` samples), by a parabola through the log of its 3 top samples; minus the shift
+    (a signature's angle runs against a CCW turn; on a `PolarGrid` content d samples further
+    CCW was rendered turned too far by d)."""
     n = len(curve)
     i0 = int(np.argmax(curve))
     height = float(curve[i0])
@@ -261,13 +228,9 @@ def _rotation_of_peak(
 def correlate_1d(
     s_ref: PackedSpectrum, s_mov: PackedSpectrum, n: int, smoothing: float
 ) -> NDArray[np.float64]:
-    """Summed phase correlation (n,) of row spectra (`forward_rows`, (rows, n)); it peaks at d
-    when mov(t) = ref(t - d).
-
-    Each element of the cross-power spectrum is whitened, the rows are summed, the zero
-    frequency is dropped (it carries no shift), and a Gaussian of `smoothing` samples shapes the
-    peak.
-    """
+    """Summed phase correlation (n,) of row spectra (rows, n), peaking at d when
+    mov(t) = ref(t - d): whitened, summed over rows, without the zero frequency, shaped by a
+    Gaussian of `smoothing` samples."""
     summed_re = np.zeros(n // 2 + 1)
     summed_im = np.zeros(n // 2 + 1)
     _summed_cross_power(s_ref, s_mov, summed_re, summed_im)
@@ -284,8 +247,7 @@ def _gaussian_lowpass_1d(n: int, smoothing: float) -> NDArray[np.float64]:
 
 @numba.njit(nogil=True, cache=True)
 def _summed_cross_power(s_ref, s_mov, out_re, out_im):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out[k] += sum over rows of C / (|C| + eps), C = mov * conj(ref) (float32 products), for
-    the frequencies k >= 1 of packed row spectra (the zero frequency is left out)."""
+    """out[k] += sum over rows of C / (|C| + eps), C = mov * conj(ref), frequencies k >= 1."""
     eps = np.float32(SPECTRUM_EPS)
     n = s_ref.shape[1]
     pairs = (n - 1) // 2

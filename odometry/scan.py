@@ -1,10 +1,4 @@
-"""The radar scan every stage consumes: the `Scan` protocol and `RadarFrame`, its record.
-
-`Scan` is structural: any object with these attributes is a scan (tests build small dataclasses;
-the dataset loaders return `RadarFrame`s). Conventions: azimuths counter-clockwise from +x
-(forward) in the sensor frame x-forward, y-left; bin k of row i lies at range
-(k + 0.5) * range_resolution_m along azimuths_rad[i]; times are integer nanoseconds.
-"""
+"""The radar scan every stage consumes: the structural `Scan` protocol and `RadarFrame`."""
 
 from __future__ import annotations
 
@@ -17,11 +11,10 @@ from numpy.typing import NDArray
 
 @runtime_checkable
 class Scan(Protocol):
-    """One radar sweep.
+    """One radar sweep (any object with these attributes).
 
     Attributes:
-        timestamp_ns: reference time of the scan [ns]: the time its pose refers to. De-skewing
-            moves every return to where it would have been seen from the pose at this time.
+        timestamp_ns: reference time of the scan [ns]: the time its pose refers to.
         polar: (n_azimuths, n_bins) uint8 intensities, one row per azimuth.
         azimuths_rad: (n_azimuths,) azimuth of each row [rad], counter-clockwise from +x
             (forward) in the sensor frame x-forward, y-left; bin k of row i lies at range

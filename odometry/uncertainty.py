@@ -1,9 +1,5 @@
-"""Covariance terms of the odometry that a registration's correlation peak does not show.
-
-Pure functions used by `odometry.Odometry`: the error of moving a scan's mid-sweep image pose to
-its reference time with a measured velocity, and the registration errors that grow with the turn
-and with a de-skew velocity that lags the vehicle's (`QualityConfig`).
-"""
+"""Covariance terms that a registration's peak does not show: moving a scan's mid-sweep image
+pose to its reference time, and the bend of a de-skew velocity that lags the vehicle's."""
 
 from __future__ import annotations
 
@@ -16,13 +12,11 @@ from raplace.se2 import between, rotate_covariance
 FloatArray = NDArray[np.float64]
 
 VELOCITY_LAG_FRACTION = 0.25
-"""The velocity that moves a pose from mid-sweep to the scan's reference time lags an
-accelerating or turning vehicle: its error is taken as this fraction of its last change, per
-axis."""
+"""The error of the velocity that moves a pose to its reference time: this fraction of its last
+change, per axis (it lags an accelerating or turning vehicle)."""
 DESKEW_ERROR_FRACTION = 1.25
-"""A scan de-skewed with a velocity that lags the vehicle's (braking, a steering change) is bent
-by about the velocity's last change times half a sweep; this multiple of that bend is its
-translation standard deviation (above 1: the measured change itself lags the true one)."""
+"""A lagging de-skew velocity bends a scan by about its last change times half a sweep; this
+multiple of the bend is the translation standard deviation (the change itself lags)."""
 
 
 def conversion_covariance(
@@ -31,13 +25,10 @@ def conversion_covariance(
     image_time_s: float,
     interval_s: float,
 ) -> FloatArray:
-    """(3, 3) covariance (scan axes) of moving a scan's image pose to its reference time.
-
-    The offset is the velocity times `image_time_s` [s]; the velocity is a difference of two
-    image poses `interval_s` [s] apart (about twice a registration's covariance
-    `registration_covariance` over the interval squared) and lags a changing velocity by
-    `VELOCITY_LAG_FRACTION` of its last change `velocity_change` (3,) [m/s, m/s, rad/s].
-    """
+    """(3, 3) covariance (scan axes) of moving a scan's image pose by the velocity over
+    `image_time_s` [s]: the velocity is two image poses `interval_s` [s] apart (twice
+    `registration_covariance` over the interval squared) lagging by `VELOCITY_LAG_FRACTION` of
+    its last change `velocity_change` (3,) [m/s, m/s, rad/s]."""
     if image_time_s == 0.0 or interval_s <= 0:
         return np.zeros((3, 3))
     lag = VELOCITY_LAG_FRACTION * np.asarray(velocity_change, dtype=float)
@@ -46,10 +37,8 @@ def conversion_covariance(
 
 
 def deskew_covariance(velocity_change: ArrayLike, scan: PreparedScan) -> FloatArray:
-    """(3, 3) covariance [m^2] of a registration error the correlation peak does not show: the
-    bend of a scan de-skewed with a velocity that lags the vehicle's by about `velocity_change`
-    (3,) (its last change [m/s, m/s, rad/s]) over half a sweep, scaled by
-    `DESKEW_ERROR_FRACTION`. It is isotropic in translation, so its axes do not matter."""
+    """(3, 3) isotropic translation covariance [m^2] of the bend of a scan de-skewed with a
+    velocity lagging by its last change `velocity_change` (3,) [m/s, m/s, rad/s]."""
     timing = scan.polar.timing
     half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
     bend = half_sweep_s * np.abs(np.asarray(velocity_change, dtype=float))
@@ -66,13 +55,11 @@ def factor_covariance(
     previous_turn: float,
     previous_conversion: FloatArray,
 ) -> FloatArray:
-    """(3, 3) covariance (previous scan's axes) of the factor from the previous scan to the pose
-    `pose` (3,), registered against the reference at `reference_pose` (3,): the registration of
-    the image frames (`registration_covariance`, in the axes of the reference's image pose
-    `reference_image_pose`), the scan's conversion to its reference time (`conversion`, its own
-    axes) and the previous scan's (`previous_conversion`, its axes). `previous_turn` [rad] turns
-    the reference's axes into the previous scan's. The factor joins the previous scan's pose, so
-    its conversion enters, not the reference's (they differ after a keyframe)."""
+    """(3, 3) covariance (previous scan's axes) of the factor from the previous scan to `pose`
+    (3,) registered against the reference at `reference_pose` (3,): the registration's (axes of
+    `reference_image_pose`), the scan's `conversion` (own axes) and the previous scan's
+    `previous_conversion` (its axes); `previous_turn` [rad] turns the reference's axes into the
+    previous scan's."""
     in_reference_axes = rotate_covariance(
         registration_covariance, float(between(reference_pose, reference_image_pose)[2])
     ) + rotate_covariance(conversion, float(between(reference_pose, pose)[2]))

@@ -1,8 +1,10 @@
-"""The odometry's motion model: the running body velocity and what it may do.
+"""The odometry's motion model: the running body velocity, what it may do, and the move of a
+scan's pose from its de-skewed image (mid-sweep) to its reference time.
 
-The velocity is a search hint and a de-skew input, never a veto (see `odometry.odometry`): its
-yaw-rate trend is bounded (`Velocity.at`), and every twist it hands out is limited to the
-plausible speed and yaw rate (`bounded_twist`).
+The velocity is a search hint and a de-skew input, never a veto: its yaw-rate trend is bounded
+(`Velocity.at`) and every twist it hands out is within the plausible speed and yaw rate
+(`bounded_twist`). Registrations chain image poses (`registration.PreparedScan`); the pose a user
+sees is the image pose moved by the velocity between the two times (`pose_at_reference`).
 """
 
 from __future__ import annotations
@@ -13,19 +15,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
+from odometry.deskew import motion_from_twist
+from odometry.registration import PreparedScan
+from raplace.se2 import compose, inverse
 from raplace.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
 TWIST_REFRESH_MPS = 0.25
-"""A scan is re-rendered when its de-skew velocity is off by more than this [m/s]."""
+"""A scan is re-rendered when its de-skew velocity is off by more than this [m/s] ..."""
 TWIST_REFRESH_RADPS = np.deg2rad(2.0)
 """... or its yaw rate by more than this [rad/s]."""
 REDESKEW_MPS = 1.0
-"""A registered scan is de-skewed and registered again when the velocity its registration
-measures differs from the one it was de-skewed with by more than this [m/s] (a velocity error
-smears a mid-sweep image symmetrically: below this it costs less than the second pass gains)."""
+"""A registered scan is de-skewed and registered again when its registration measures a velocity
+this far [m/s] from its de-skew's (below, the symmetric smear costs less than a second pass) ..."""
 REDESKEW_RADPS = np.deg2rad(5.0)
-"""... or by more than this in yaw rate [rad/s]."""
+"""... or a yaw rate this far [rad/s]."""
 
 
 @dataclass(frozen=True)
@@ -40,10 +44,8 @@ class Velocity:
     span_s: float = 0.0
 
     def at(self, time_ns: int, trend_gain: float) -> FloatArray:
-        """The twist expected at `time_ns`: constant, plus `trend_gain` times the yaw-rate trend
-        extrapolated linearly, bounded: the extrapolated change is at most the last measured
-        change, and it never turns the yaw rate to the other side (leaving a turn, an
-        unbounded trend predicts the turn to swing the other way)."""
+        """The twist at `time_ns` plus `trend_gain` times the yaw-rate trend extrapolated
+        linearly, by at most the last measured change and never across zero yaw rate."""
         twist = self.twist.copy()
         if trend_gain == 0.0 or self.span_s <= 0.0:
             return twist
@@ -81,8 +83,33 @@ def close_twists(
     speed_mps: float = TWIST_REFRESH_MPS,
     yaw_rate_radps: float = TWIST_REFRESH_RADPS,
 ) -> bool:
-    """Two de-skew twists render nearly the same image: they differ by at most `speed_mps` in
-    velocity and `yaw_rate_radps` in yaw rate."""
+    """Two de-skew twists differ by at most `speed_mps` and `yaw_rate_radps`."""
     return bool(
         np.hypot(a[0] - b[0], a[1] - b[1]) <= speed_mps and abs(a[2] - b[2]) <= yaw_rate_radps
     )
+
+
+def pose_at_reference(image_pose: FloatArray, twist: FloatArray, image_time_s: float) -> FloatArray:
+    """(3,) T_world_radar at the reference time of a scan whose image frame is at `image_pose`
+    (world) `image_time_s` [s] from the reference time, moving at `twist` in between."""
+    return compose(image_pose, inverse(motion_from_twist(twist, image_time_s)))
+
+
+def interpolated_twist(before: Velocity, after: Velocity, time_ns: int) -> FloatArray:
+    """(3,) twist at `time_ns`, linear in time between two measured velocities (each at its
+    `time_ns`), held constant outside them."""
+    span_ns = after.time_ns - before.time_ns
+    if span_ns <= 0:
+        return np.asarray(after.twist, dtype=np.float64).copy()
+    fraction = float(np.clip((time_ns - before.time_ns) / span_ns, 0.0, 1.0))
+    return np.asarray((1.0 - fraction) * before.twist + fraction * after.twist, dtype=np.float64)
+
+
+def image_time_ns(scan: PreparedScan) -> int:
+    """Absolute time of a scan's image frame [ns]."""
+    return scan.timestamp_ns + int(round(scan.image_time_s * NS_PER_S))
+
+
+def image_interval_s(previous: PreparedScan, scan: PreparedScan, dt_s: float) -> float:
+    """Time [s] from `previous`'s image time to `scan`'s, `dt_s` apart in reference time."""
+    return dt_s + scan.image_time_s - previous.image_time_s

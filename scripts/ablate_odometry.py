@@ -39,7 +39,6 @@ import numpy as np
 
 import odometry.deskew_choice as deskew_choice
 import odometry.odometry as odometry_module
-import odometry.recovery as recovery
 import odometry.registration as registration
 from odometry.rotation import ROTATION
 from radar_slam.datasets import open_sequence
@@ -110,6 +109,10 @@ def _no_trend() -> contextlib.AbstractContextManager[None]:
     return _patched(deskew_choice, "YAW_TREND_GAIN", 0.0)
 
 
+def _keyframe_only() -> contextlib.AbstractContextManager[None]:
+    return _patched(odometry_module.Odometry, "_fallback", lambda *_a: None)
+
+
 def _one_refinement() -> contextlib.AbstractContextManager[None]:
     return _patched(registration, "ROTATION", dataclasses.replace(ROTATION, refine_passes=1))
 
@@ -118,16 +121,12 @@ def _no_refinement() -> contextlib.AbstractContextManager[None]:
     return _patched(registration, "ROTATION", dataclasses.replace(ROTATION, refine=False))
 
 
-def _keyframe_only() -> contextlib.AbstractContextManager[None]:
-    return _patched(recovery, "fallback_references", lambda keyframe, *_a: [keyframe])
-
-
 VARIANTS = (
     Variant("base", "(nothing: the defaults)"),
     Variant("no_trend", "yaw-trend hypothesis", patch=_no_trend),
     Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
     Variant("no_deferred", "deferred first images", patch=_no_deferred_first_images),
-    Variant("no_fallback", "fallback chain (keyframe only)", patch=_keyframe_only),
+    Variant("no_fallback", "fallback to the last registered scan", patch=_keyframe_only),
     Variant("one_refine", "second Fourier-Mellin refinement", patch=_one_refinement),
     Variant("no_refine", "Fourier-Mellin refinement", patch=_no_refinement),
 )

@@ -18,13 +18,15 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import OdometryConfig, PreprocessConfig
 from odometry.deskew import sampling_maps
-from odometry.packed import forward_rows, inverse, pack
 from odometry.phase_correlation import (
     PEAK_EXCLUSION_SIGMAS,
     SPECTRUM_EPS,
     correlate,
     forward,
+    forward_rows,
+    inverse,
     locate_peak,
+    pack,
 )
 from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
 from odometry.registration import PreparedScan, _residual_rotation, coarse_level

@@ -1,4 +1,4 @@
-"""The de-skew yaw-rate search by correlation peak quality (`odometry.rate_search`, used by loop
+"""The de-skew yaw-rate search by correlation peak quality (`odometry.deskew_choice`, used by loop
 verification at low frame rates; `tests/test_loops.py` checks it on a loop query)."""
 
 from __future__ import annotations
@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 
 from odometry import OdometryConfig, deskew_choice
-from odometry.deskew_choice import weak_searched
+from odometry.deskew_choice import MAX_VERTEX_STEPS, vertex_offset, weak_searched
 from odometry.preprocess import preprocess_polar
-from odometry.rate_search import MAX_VERTEX_STEPS, vertex_offset
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from radar_slam.datasets import OxfordSequence
 

@@ -1,5 +1,5 @@
 """A scan's pose at its reference time: its mid-sweep image pose moved by the velocity
-(`odometry.reference_time`), and results that chain in those poses."""
+(`odometry.velocity`), and results that chain in those poses."""
 
 from __future__ import annotations
 
@@ -10,8 +10,7 @@ import pytest
 
 from odometry import Odometry, OdometryResult
 from odometry.deskew import motion_from_twist
-from odometry.reference_time import interpolated_twist, pose_at_reference
-from odometry.velocity import Velocity
+from odometry.velocity import Velocity, interpolated_twist, pose_at_reference
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
 from raplace import se2

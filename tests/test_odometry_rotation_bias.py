@@ -49,7 +49,7 @@ def _yaw_errors_mdeg(
         estimate = estimate_motion(ref, cur, cfg)
         assert estimate.ok, estimate.reason
         np.testing.assert_allclose(estimate.motion[:2], translation_m, atol=0.05)
-        errors.append(np.degrees(estimate.dyaw) * 1000.0 - rotation_mdeg)
+        errors.append(np.degrees(estimate.motion[2]) * 1000.0 - rotation_mdeg)
     return np.array(errors)
 
 

@@ -12,14 +12,12 @@ error. Here the same U-turn is rendered at reduced bins in the `tiny` town.
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from numpy.typing import NDArray
 from test_odometry_recovery import drive, errors, run, tiny_scene  # noqa: F401
 
 from odometry.config import OdometryConfig
 from odometry.odometry import Odometry
-from odometry.recovery import agrees, chosen, fallback_references, plausible_twist
-from odometry.registration import MotionEstimate
+from odometry.recovery import agrees, plausible_twist
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.sim.generate import Scene
 from radar_slam.sim.render import RenderTables
@@ -70,41 +68,8 @@ def test_an_implausible_twist_is_not_a_velocity() -> None:
     assert not plausible_twist(np.array([50.0, 0.0, 0.0]), config)
 
 
-def estimate(quality: float, ok: bool) -> MotionEstimate:
-    return MotionEstimate(
-        motion=np.array([1.0, 0.0, 1.5]),
-        covariance=np.eye(3),
-        quality=quality,
-        rotation_quality=quality,
-        ok=ok,
-        reason="" if ok else "weak translation peak",
-    )
-
-
-@pytest.mark.parametrize(
-    ("tried", "expect"),
-    [
-        ([(40.0, True)], 0),
-        ([(5.0, False), (20.0, True)], 1),
-        ([(5.0, False), (4.0, False)], None),
-    ],
-)
-def test_the_registration_that_passed_is_used(
-    tried: list[tuple[float, bool]], expect: int | None
-) -> None:
-    """The references are tried in order until one registers; none registering is a gap."""
-    reference, chosen_estimate = chosen([(k, estimate(*t)) for k, t in enumerate(tried)])
-    assert reference == expect
-    assert chosen_estimate.ok == (expect is not None)
-
-
 def test_agreement_with_the_prediction() -> None:
     config = OdometryConfig()
     assert agrees(np.array([10.0, 1.0, 0.05]), np.array([9.0, 0.5, 0.0]), config)
     assert not agrees(np.array([10.0, 1.0, 0.0]), np.array([8.0, 1.0, 0.0]), config)
     assert agrees(np.array([0.0, 0.0, np.pi - 0.01]), np.array([0.0, 0.0, -np.pi]), config)
-
-
-def test_earlier_keyframes_come_before_a_gap_scan() -> None:
-    assert fallback_references("k", "r", ["k1", "k2"], "gap") == ["k", "r", "k1", "k2", "gap"]
-    assert fallback_references("k", "k", ["k1"], "k") == ["k", "k1"]

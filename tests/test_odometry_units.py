@@ -98,7 +98,7 @@ def test_rendering_matches_raplace_warper() -> None:
     )
     conditioned = preprocess_polar(scan, bare)
     np.testing.assert_array_equal(conditioned.image, polar.astype(np.float32))
-    level = cartesian_level(0.5, 256, 1e-6)
+    level = cartesian_level(0.5, 256)
     ours = render_cartesian(conditioned, level) / np.maximum(level.window, 1e-12)
     theirs = CartesianWarper(CartesianGrid(0.5, 256))(polar, scan.azimuths_rad, RES_M)
     inside = level.window > 0.5

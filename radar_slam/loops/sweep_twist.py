@@ -5,7 +5,7 @@ The twist of one step between two consecutive scans (`twist_from_motion`) is the
 over that step, i.e. the velocity at the step's middle when it changes linearly. A scan's sweep
 is best described by its velocity at the scan's mean acquisition time (the mean of its azimuth
 times), so the twist is interpolated linearly in time between the step before the scan and the
-step after it (`odometry.reference_time.interpolated_twist`, held constant outside them):
+step after it (`odometry.interpolated_twist`, held constant outside them):
 
 - scans stamped at the end of the sweep (MulRan, synthetic) at their full rate: the step before
   the scan spans exactly its sweep, its middle is the mean acquisition time, and the result is

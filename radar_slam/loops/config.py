@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from odometry import OdometryConfig
 from raplace import RaPlaceConfig, checks
@@ -236,9 +237,6 @@ class LoopClosureConfig:
         covariance: covariance model of verified loops.
         consistency: pairwise consistency of verified loops.
         throttle: fewer verifications along stretches already closed (with poses).
-        scan_cache_mb: database scans kept in memory for verification [MiB] (the least
-            recently used beyond it are read again through the detector's `scan_loader`; about
-            1.3 MiB per MulRan scan).
         pose_image_cache_mb: the verifier's pose spectra of database scans kept [MiB] (about
             0.6 MiB each with the default pose image).
     """
@@ -256,11 +254,14 @@ class LoopClosureConfig:
     covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
     throttle: ThrottleConfig = field(default_factory=ThrottleConfig)
-    scan_cache_mb: float = 384.0
     pose_image_cache_mb: float = 96.0
 
+    REMOVED_KEYS: ClassVar[dict[str, str]] = {
+        "scan_cache_mb": "a run keeps no scans: it verifies a database scan from its record "
+        "(radar_slam.maps.keyframes)",
+    }
+
     def __post_init__(self) -> None:  # value ranges
-        checks.non_negative("scan_cache_mb", self.scan_cache_mb)
         checks.non_negative("pose_image_cache_mb", self.pose_image_cache_mb)
         checks.at_least("candidates", self.candidates, 1)
         checks.at_least("loops_per_query", self.loops_per_query, 1)

@@ -30,7 +30,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from odometry import Scan, Velocity
-from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
 from radar_slam.loops.recent import HeldBackDatabase, held_back_retrieval, within_reach
@@ -143,9 +142,10 @@ class LoopDetector:
 
     Args:
         config: loop-closing settings (defaults when None).
-        scan_loader: returns the scan of a key again when it is needed for verification and is
-            no longer among the `config.scan_cache_mb` of recent scans kept; without it the
-            detector keeps every database scan in memory (about 1.3 MB per MulRan scan).
+        scan_loader: returns what a database scan's key is verified against, each time it is a
+            candidate (the pipeline: the scan's record image, `radar_slam.maps.keyframes`, so
+            that no scan is read twice); without it the detector keeps every database scan in
+            memory (about 1.3 MB per MulRan scan).
         recognizer: the place database (default: RaPlace `PlaceRecognizer`).
         verifier: the geometric verifier (default: `GeometricVerifier`).
         on_describe: called with (key, descriptor) each time a scan is described (in the
@@ -187,7 +187,6 @@ class LoopDetector:
         self.gate = ConsistencyGate(cfg.consistency)
         self.throttle = StretchThrottle(cfg.throttle)
         self._entries: dict[int, _Entry] = {}
-        self._scans: ByteBudgetCache[Scan] = ByteBudgetCache(cfg.scan_cache_mb, _scan_bytes)
         self._decisions: list[LoopDecision] = []
         self._tally: Counter[str] = Counter()
         self._track = _Track()
@@ -365,12 +364,8 @@ class LoopDetector:
     def _scan_of(self, entry: _Entry) -> Scan:
         if entry.scan is not None:
             return entry.scan
-        scan = self._scans.get(entry.key)
-        if scan is None:
-            assert self.scan_loader is not None
-            scan = self.scan_loader(entry.key)
-            self._scans.put(entry.key, scan)
-        return scan
+        assert self.scan_loader is not None
+        return self.scan_loader(entry.key)
 
     def _query_and_insert(
         self,
@@ -411,8 +406,6 @@ class LoopDetector:
             twist_change=change,
         )
         self._entries[key] = entry
-        if entry.scan is None:
-            self._scans.put(key, scan)
         self.proposed += len(candidates)
         changes: dict[int, LoopStatus] = {}
         if pose is not None and not self.throttle.due(
@@ -512,12 +505,6 @@ class LoopDetector:
             if status == "accepted":
                 accepted.append(new.constraint())
         return accepted
-
-
-def _scan_bytes(scan: Scan) -> int:
-    """Bytes a scan keeps in memory (its arrays)."""
-    arrays = (scan.polar, scan.azimuths_rad, scan.azimuth_times_ns)
-    return sum(int(np.asarray(a).nbytes) for a in arrays if a is not None)
 
 
 class NullLoopDetector:

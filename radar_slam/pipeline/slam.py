@@ -113,11 +113,12 @@ class Pipeline:
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
         self._read_scan = LockedReader(sequence)
-        self.keyframes = self._keyframe_stage(record_map)
+        self.record_map = record_map
+        self.keyframes = self._keyframe_stage(record_map, loop_detector is None)
         self.loop_detector: LoopDetectorProtocol = (
             make_loop_detector(
                 self.config.loop_closure,
-                scan_loader=self._reread,
+                scan_loader=self.keyframes.scan,
                 on_describe=self.keyframes.offer_descriptor,
             )
             if loop_detector is None
@@ -169,7 +170,8 @@ class Pipeline:
             self._report(self.frames, "last loops")
             self._close_loops(self.loops.finish(), None)
             with self.timer("map keyframes"):
-                self._map_keyframes = self.keyframes.finish()
+                recorded = self.keyframes.finish()
+                self._map_keyframes = recorded if self.record_map else None
         finally:
             reader.close()
             self.loops.close()
@@ -182,21 +184,21 @@ class Pipeline:
             self.observer.on_finish(results)
         return results
 
-    def _keyframe_stage(self, record_map: bool) -> KeyframeStage:
-        """The map keyframes of the run: made as it goes, or not kept."""
-        if not record_map:
-            return NullKeyframeRecorder()
+    def _keyframe_stage(self, record_map: bool, own_detector: bool) -> KeyframeStage:
+        """The scan records of the run (`radar_slam.maps.keyframes`): the map keyframes when
+        `record_map`, and the loop database's scans when the run's own detector closes loops
+        (it verifies them from their records); else nothing is kept."""
         cfg = self.config
-        return KeyframeRecorder(cfg.maps, cfg.odometry, cfg.loop_closure.raplace.descriptor)
+        loops = own_detector and cfg.loop_closure.enabled
+        if not (record_map or loops):
+            return NullKeyframeRecorder()
+        descriptor = cfg.loop_closure.raplace.descriptor
+        return KeyframeRecorder(cfg.maps, cfg.odometry, descriptor, keep_map=record_map)
 
     # -- per-scan steps -----------------------------------------------------------------------
     def _read(self, reader: ScanReader) -> RadarFrame:
         with self.timer("read"):
             return reader.next()
-
-    def _reread(self, index: int) -> RadarFrame:
-        """A database scan read again for loop verification (timed as loop detection)."""
-        return self._read_scan(index)
 
     def _track(self, frame: RadarFrame) -> OdometryResult:
         with self.timer("odometry"):

@@ -50,7 +50,7 @@ from radar_slam.loops.sweep_twist import (
 )
 from radar_slam.loops.throttle import StretchThrottle
 from radar_slam.loops.tracking import Refiner, predicted_loop
-from radar_slam.loops.verification import GeometricVerifier, Verifier
+from radar_slam.loops.verification import GeometricVerifier, Verifier, sweep_s
 from raplace import NS_PER_S, Candidate, DescriptorExtractor, PlaceRecognizer, Recognizer, between
 
 log = logging.getLogger(__name__)
@@ -128,6 +128,7 @@ class _Entry:
     scan: Scan | None
     segment: int = 0
     twist_change: FloatArray | None = None  # across the scan: the loop covariance's de-skew term
+    sweep_s: float | None = None  # the scan's sweep duration [s], for the same terms
 
 
 class LoopDetector:
@@ -404,6 +405,7 @@ class LoopDetector:
             scan=None if self.scan_loader is not None else scan,
             segment=held.segment,
             twist_change=change,
+            sweep_s=sweep_s(scan),
         )
         self._entries[key] = entry
         self.proposed += len(candidates)
@@ -417,7 +419,12 @@ class LoopDetector:
         for candidate in candidates:  # at most `candidates` (k), best first
             match = self._entries[candidate.key]
             match_scan = KeyScan(
-                match.key, match.timestamp_ns, self._scan_of(match), match.twist, match.twist_change
+                match.key,
+                match.timestamp_ns,
+                self._scan_of(match),
+                match.twist,
+                match.twist_change,
+                sweep_s=match.sweep_s,
             )
             result = self._verify(entry, match, query, match_scan)
             decision = len(self._decisions)

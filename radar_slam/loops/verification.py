@@ -112,11 +112,18 @@ def swept_turn_variance(*scans: KeyScan) -> float:
     return total
 
 
-def _half_sweep_s(key_scan: KeyScan) -> float | None:
-    times = key_scan.scan.azimuth_times_ns
+def sweep_s(scan: Scan) -> float | None:
+    """How long a scan's sweep lasted [s] (None without azimuth times)."""
+    times = scan.azimuth_times_ns
     if times is None or len(times) == 0:
         return None
-    return 0.5 * float(np.max(times) - np.min(times)) / NS_PER_S
+    return float(np.max(times) - np.min(times)) / NS_PER_S
+
+
+def _half_sweep_s(key_scan: KeyScan) -> float | None:
+    sweep = sweep_s(key_scan.scan)
+    sweep = key_scan.sweep_s if sweep is None else sweep
+    return None if sweep is None else 0.5 * sweep
 
 
 def turned(scan: Scan, turn_rad: float) -> RadarFrame:

@@ -53,7 +53,6 @@ from radar_slam.maps.keyframes import (
 )
 from radar_slam.pipeline.concurrency import (
     InlineLoopRunner,
-    LockedReader,
     ScanReader,
     make_loop_runner,
 )
@@ -112,7 +111,6 @@ class Pipeline:
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
-        self._read_scan = LockedReader(sequence)
         self.record_map = record_map
         self.keyframes = self._keyframe_stage(record_map, loop_detector is None)
         self.loop_detector: LoopDetectorProtocol = (
@@ -150,7 +148,9 @@ class Pipeline:
         On an error or an interruption the threads are stopped before it propagates.
         """
         self._start = time.perf_counter()
-        reader = ScanReader(self._read_scan, self.frames, self.config.concurrency.read_ahead_scans)
+        reader = ScanReader(
+            self.sequence.__getitem__, self.frames, self.config.concurrency.read_ahead_scans
+        )
         try:
             held: tuple[RadarFrame, PreparedScan | None] | None = None
             for index in range(self.frames):

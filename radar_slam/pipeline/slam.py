@@ -88,11 +88,13 @@ class Pipeline:
         progress: called after each scan with a `Progress` (e.g. to drive a progress bar).
         loop_detector: a detector to use instead of the configured one (e.g. one with another
             place recognizer or verifier); it must not have seen scans yet. Its keys are the scan
-            indices.
+            indices; it keeps or loads its database scans itself (the configured one verifies
+            them from the run's records, `radar_slam.maps.keyframes`).
         observer: watches the run scan by scan (e.g. the live viewer); see
             `radar_slam.pipeline.observer.PipelineObserver`.
         record_map: keep each map keyframe's descriptor and image as the run goes
-            (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again).
+            (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again);
+            the database scans of the loop detector are recorded either way.
     """
 
     def __init__(

@@ -20,7 +20,7 @@ import pytest
 
 from odometry import preprocess_polar
 from radar_slam.cli import main
-from radar_slam.datasets.frame import RadarSequence
+from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.maps.images import PSEUDO_SENSOR
 from radar_slam.maps.keyframes import KeyframeRecorder
 from radar_slam.pipeline import Pipeline, PipelineConfig, Progress, Results, load_config
@@ -55,8 +55,9 @@ class Counts:
         conditioned: scan timestamp [ns] -> odometry conditionings of the scan itself.
         record_conditioned: conditionings of database scans remade from their records.
         described: polar image -> RaPlace descriptors made of it.
-        pose_images: polar image -> RaPlace pose images made of it.
+        pose_images: polar image of a scan -> RaPlace pose images made of it.
         records_read: database scans taken back from their records for verification.
+        record_pose_images: RaPlace pose images made of those.
     """
 
     decodes: Counter[int]
@@ -65,6 +66,7 @@ class Counts:
     described: Counter[str]
     pose_images: Counter[str]
     records_read: int
+    record_pose_images: int
 
 
 @contextmanager
@@ -93,20 +95,26 @@ def counting(sequence: RadarSequence) -> Iterator[Counts]:
                 PoseEstimator, "image", autospec=True, side_effect=PoseEstimator.image
             )
         )
-        record = stack.enter_context(
-            mock.patch.object(
-                KeyframeRecorder, "scan", autospec=True, side_effect=KeyframeRecorder.scan
-            )
-        )
-        counts = Counts(Counter(), Counter(), 0, Counter(), Counter(), 0)
+        records: list[RadarFrame] = []
+        scan_of_record = KeyframeRecorder.scan
+
+        def read_record(recorder: KeyframeRecorder, scan_index: int) -> RadarFrame:
+            records.append(scan_of_record(recorder, scan_index))
+            return records[-1]
+
+        stack.enter_context(mock.patch.object(KeyframeRecorder, "scan", read_record))
+        counts = Counts(Counter(), Counter(), 0, Counter(), Counter(), 0, 0)
         yield counts
         counts.decodes.update(int(call.args[1]) for call in read.call_args_list)
         scans = [call.args[0] for m in conditionings for call in m.call_args_list]
         counts.conditioned.update(int(s.timestamp_ns) for s in scans if s.sensor != PSEUDO_SENSOR)
         counts.record_conditioned = sum(s.sensor == PSEUDO_SENSOR for s in scans)
         counts.described.update(content_key(call.args[1]) for call in describe.call_args_list)
-        counts.pose_images.update(content_key(call.args[1]) for call in pose.call_args_list)
-        counts.records_read = record.call_count
+        from_records = {content_key(frame.polar) for frame in records}
+        imaged = [content_key(call.args[1]) for call in pose.call_args_list]
+        counts.pose_images.update(key for key in imaged if key not in from_records)
+        counts.record_pose_images = sum(key in from_records for key in imaged)
+        counts.records_read = len(records)
 
 
 @dataclass(frozen=True)
@@ -137,8 +145,10 @@ def test_database_scans_are_verified_from_their_records(counted_run: CountedRun)
     assert metrics.loops_accepted_true == metrics.loops_accepted
     counts = counted_run.counts
     assert counts.records_read >= metrics.loops_proposed
-    # each record read back is conditioned for its registration, the scan itself never again
+    # each record read back is conditioned for its registration (the scan itself never again),
+    # and imaged for the sinogram pose unless the loop was checked from a prediction
     assert counts.record_conditioned == counts.records_read
+    assert 0 < counts.record_pose_images <= counts.records_read
 
 
 def test_each_scan_is_conditioned_once(tiny_loop: RadarSequence, counted_run: CountedRun) -> None:

@@ -237,8 +237,6 @@ class LoopClosureConfig:
         covariance: covariance model of verified loops.
         consistency: pairwise consistency of verified loops.
         throttle: fewer verifications along stretches already closed (with poses).
-        pose_image_cache_mb: the verifier's pose spectra of database scans kept [MiB] (about
-            0.6 MiB each with the default pose image).
     """
 
     enabled: bool = True
@@ -254,15 +252,15 @@ class LoopClosureConfig:
     covariance: LoopCovarianceConfig = field(default_factory=LoopCovarianceConfig)
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
     throttle: ThrottleConfig = field(default_factory=ThrottleConfig)
-    pose_image_cache_mb: float = 96.0
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
         "scan_cache_mb": "a run keeps no scans: it verifies a database scan from its record "
         "(radar_slam.maps.keyframes)",
+        "pose_image_cache_mb": "a database scan's pose spectrum is made each time it is a "
+        "candidate (keeping them saved nothing measurable)",
     }
 
     def __post_init__(self) -> None:  # value ranges
-        checks.non_negative("pose_image_cache_mb", self.pose_image_cache_mb)
         checks.at_least("candidates", self.candidates, 1)
         checks.at_least("loops_per_query", self.loops_per_query, 1)
         checks.positive("max_descriptor_distance", self.max_descriptor_distance)

@@ -29,7 +29,6 @@ from odometry import (
     register,
     searched_registration,
 )
-from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LoopClosureConfig, LoopCovarianceConfig
 from radar_slam.loops.records import KeyScan, Verification
 from raplace import (
@@ -187,9 +186,9 @@ class GeometricVerifier:
     """Sinogram relative pose, refined by phase correlation (see the module docstring).
 
     Caches the current query's pose spectrum and prepared scan, so verifying several candidates
-    of one query conditions the query scan once, and the pose spectra of recent database scans
-    (by key and time, within `cfg.pose_image_cache_mb`): a scan is often a candidate of several
-    queries.
+    of one query conditions the query scan once. A database scan's pose spectrum is made each
+    time it is a candidate (from its record in a run; keeping them saved nothing measurable on
+    `synthetic/long`).
 
     A caller that has already conditioned a scan for registration (the pipeline's odometry)
     hands it over with `offer` before the detector sees the scan; the query is then not
@@ -200,9 +199,6 @@ class GeometricVerifier:
     def __init__(self, cfg: LoopClosureConfig) -> None:
         self.cfg = cfg
         self.pose_estimator = PoseEstimator(cfg.raplace.pose)
-        self._map_spectra: ByteBudgetCache[PoseSpectrum] = ByteBudgetCache(
-            cfg.pose_image_cache_mb, lambda spectrum: spectrum.nbytes
-        )
         self._query_key: int | None = None
         self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
@@ -279,19 +275,11 @@ class GeometricVerifier:
             prepared, aligned, estimate, self.cfg.refinement, query.twist_span_s
         )
 
-    def _map_spectrum(self, match: KeyScan) -> PoseSpectrum:
-        key = (match.key, int(match.timestamp_ns))  # a key reused for another scan misses
-        spectrum = self._map_spectra.get(key)
-        if spectrum is None:
-            spectrum = self._spectrum(match.scan)
-            self._map_spectra.put(key, spectrum)
-        return spectrum
-
     def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
         """Verify T_query_match; never raises for a bad match (the reason says why)."""
         vcfg = self.cfg.verification
         rel: RelativePose = self.pose_estimator.estimate_spectra(
-            self._query(query), self._map_spectrum(match)
+            self._query(query), self._spectrum(match.scan)
         )
         sinogram = motion_compensated(rel.as_array(), query, match)
         nan33 = np.full((3, 3), np.nan)

@@ -17,7 +17,7 @@ Numbers are written with `repr`, the shortest text that reads back to the same f
 
 Mapping to `PoseGraph` (`g2o_to_pose_graph`): an edge between vertices adjacent in sorted id order
 is odometry, any other edge a loop (robust kernel); `FIX` vertices get a prior at their pose with
-`GraphConfig.prior_sigmas`; without `FIX`, the graph's automatic prior anchors the smallest id.
+`radar_slam.graph.PRIOR_SIGMAS`; without `FIX`, the graph's automatic prior anchors the smallest id.
 Writing a `PoseGraph` writes each prior as `FIX` (g2o has no standard SE(2) prior edge, so the
 prior covariance is not kept).
 """
@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from radar_slam.errors import GraphError, GraphFormatError
-from radar_slam.graph import POSE_DIM, GraphConfig, PoseGraph
+from radar_slam.graph import POSE_DIM, PRIOR_SIGMAS, GraphConfig, PoseGraph
 from radar_slam.results import write_text_atomically
 
 log = logging.getLogger(__name__)
@@ -296,7 +296,7 @@ def g2o_to_pose_graph(record: G2oGraph, config: GraphConfig | None = None) -> Po
     rank = {key: n for n, key in enumerate(keys)}
     for key in keys:
         graph.add_keyframe(key, record.vertices[key])
-    sigmas = np.asarray(graph.config.prior_sigmas, dtype=np.float64)
+    sigmas = np.asarray(PRIOR_SIGMAS, dtype=np.float64)
     for key in record.fixed:
         graph.add_prior(key, record.vertices[key], np.diag(sigmas**2))
     for e in record.edges:

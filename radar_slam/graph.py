@@ -11,7 +11,7 @@ Conventions (the whole project's):
 
 Anchoring: a graph must be tied to the world. If no prior has been added when the graph is first
 optimised (`update()` or `optimize_final()`), a prior on the *first keyframe added*, at its initial
-guess, with covariance `diag(GraphConfig.prior_sigmas ** 2)` is added automatically. An explicit
+guess, with covariance `diag(PRIOR_SIGMAS ** 2)` is added automatically. An explicit
 `add_prior` before that replaces the automatic one.
 
 Loop factors carry the robust kernel of `GraphConfig.loop_kernel`; odometry and priors are plain
@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import ClassVar, Literal
 
 import gtsam
 import numpy as np
@@ -59,8 +59,10 @@ GncLoss = Literal["tls", "gm"]
 ConstraintKind = Literal["odometry", "loop"]
 
 
-DEFAULT_PRIOR_SIGMAS: tuple[float, float, float] = (1e-3, 1e-3, 1e-4)
-"""Standard deviations (x [m], y [m], yaw [rad]) of the prior anchoring the first keyframe."""
+PRIOR_SIGMAS: tuple[float, float, float] = (1e-3, 1e-3, 1e-4)
+"""Standard deviations (x [m], y [m], yaw [rad]) of the prior anchoring the first keyframe (and
+of the prior put on `FIX` vertices read from g2o): tight enough to pin the graph, loose enough
+to keep it well conditioned."""
 
 ONLINE_ISAM2_RELINEARIZATION = (0.01, 1)
 """ISAM2 relinearisation threshold (m / rad) and check interval (updates) when the online estimate
@@ -71,108 +73,86 @@ REFINED_ISAM2_RELINEARIZATION = (0.1, 10)
 then only serves the loop gates and the live view, and relinearising less keeps the cost of each
 update from growing with the graph on long drives."""
 
-DEFAULT_LOOP_UPDATE_INTERVAL = 10
-"""Scans between ISAM2 updates that carry loops in `radar_slam.pipeline.Pipeline`."""
+ISAM2_ITERATIONS = 1
+"""ISAM2 update steps per `PoseGraph.update()`: the first carries the new factors, any others
+relinearise once more (helps the online estimate after a large loop-closure correction)."""
 
-DEFAULT_SETTLED_UPDATE_INTERVAL = 100
-"""... when every new loop agrees with the current estimate (see `GraphConfig`)."""
+LM_MAX_ITERATIONS = 100
+"""Levenberg-Marquardt iteration cap of the final pass (also inside GNC)."""
+LM_RELATIVE_ERROR_TOL = 1e-10
+"""Levenberg-Marquardt relative error decrease to stop at."""
+LM_ABSOLUTE_ERROR_TOL = 1e-10
+"""... and absolute error decrease."""
 
-DEFAULT_SETTLED_CHI2 = 11.345
-"""A loop agrees with the current estimate below this squared Mahalanobis distance (chi-square
-99 % for 3 degrees of freedom)."""
+GNC_LOSS: GncLoss = "tls"
+"""GNC surrogate loss: truncated least squares (rather than Geman-McClure): a loop is either an
+inlier with its full weight or an outlier with none."""
 
-DEFAULT_ISAM2_ITERATIONS = 1
-"""ISAM2 update steps per `PoseGraph.update()`: the first carries the new factors, the others
-relinearise once more (helps after a large loop-closure correction)."""
-
-DEFAULT_LM_MAX_ITERATIONS = 100
-DEFAULT_LM_RELATIVE_ERROR_TOL = 1e-10
-DEFAULT_LM_ABSOLUTE_ERROR_TOL = 1e-10
-
-DEFAULT_GNC_INLIER_PROBABILITY = 0.9999
+GNC_INLIER_PROBABILITY = 0.9999
 """GNC inlier threshold: a loop whose squared Mahalanobis distance exceeds the chi-square quantile
 at this probability (3 degrees of freedom: 21.1, i.e. 4.6 sigma) is treated as an outlier. 0.99
 (11.3) made GNC reject true loops when the odometry covariance understates a strong drift
 (tests/test_graph.py, "strong" scenario)."""
 
+_RELINEARIZATION = (
+    "graph.ONLINE_ISAM2_RELINEARIZATION or radar_slam.graph.REFINED_ISAM2_RELINEARIZATION, "
+    "by final_pass"
+)
+_REPLACED_BY = {
+    "prior_sigmas": "graph.PRIOR_SIGMAS",
+    "isam2_relinearize_threshold": _RELINEARIZATION,
+    "isam2_relinearize_skip": _RELINEARIZATION,
+    "isam2_iterations": "graph.ISAM2_ITERATIONS",
+    "loop_update_interval": "pipeline.slam.LOOP_UPDATE_INTERVAL",
+    "settled_update_interval": "pipeline.slam.SETTLED_UPDATE_INTERVAL",
+    "settled_chi2": "pipeline.slam.SETTLED_CHI2",
+    "lm_max_iterations": "graph.LM_MAX_ITERATIONS",
+    "lm_relative_error_tol": "graph.LM_RELATIVE_ERROR_TOL",
+    "gnc_loss": "graph.GNC_LOSS",
+    "gnc_inlier_probability": "graph.GNC_INLIER_PROBABILITY",
+}
+REMOVED_KEYS = {
+    key: f"now a constant of the method (radar_slam.{name})" for key, name in _REPLACED_BY.items()
+}
+"""Keys of the `graph` section that are gone, and what replaced them (`raplace.config_io`)."""
+
 
 @dataclass(frozen=True)
 class GraphConfig:
-    """Settings of the pose-graph back end.
+    """Settings of the pose-graph back end (the `graph` section of a radar-slam config).
 
     Attributes:
-        prior_sigmas: standard deviations (x [m], y [m], yaw [rad]) of the automatic prior on the
-            first keyframe (and of the prior put on `FIX` vertices read from g2o).
-        loop_kernel: robust loss of loop factors in ISAM2 and the LM final pass.
-        loop_kernel_width: its parameter k, in standard deviations (whitened units).
-        isam2_relinearize_threshold: ISAM2 relinearisation threshold (tangent units, m / rad);
-            None: by `final_pass` (`ONLINE_ISAM2_RELINEARIZATION` with "none", else
-            `REFINED_ISAM2_RELINEARIZATION`), see `isam2_relinearization()`.
-        isam2_relinearize_skip: ISAM2 relinearisation check interval (updates); None: likewise.
-        isam2_iterations: ISAM2 steps per `PoseGraph.update()` (>= 1).
-        loop_update_interval: the pipeline adds accepted loops to the graph as they come but runs
-            ISAM2 at most once every this many scans (each loop update re-eliminates the path
-            back to the loop's older end; 1: after every scan with new loops) ...
-        settled_update_interval: ... and at most once every this many scans while every loop
-            added since the last update agrees with the current estimate (a stretch already
-            closed: the update would barely move it; its loops enter the graph all the same).
-        settled_chi2: a loop agrees with the current estimate when its squared Mahalanobis
-            distance from it (`PoseGraph.residual_chi2`) is below this.
-        final_pass: batch pass of `optimize_final()`: Levenberg-Marquardt with the robust loop
-            kernel, graduated non-convexity (odometry and priors known inliers, loops plain
-            Gaussian under the GNC loss), or nothing.
-        lm_max_iterations: Levenberg-Marquardt iteration cap (also inside GNC).
-        lm_relative_error_tol: Levenberg-Marquardt relative error decrease to stop at.
-        gnc_loss: GNC surrogate loss: truncated least squares or Geman-McClure.
-        gnc_inlier_probability: chi-square probability defining the GNC inlier threshold.
+        loop_kernel: robust loss of loop factors in ISAM2 and the LM final pass ("cauchy",
+            "huber" or "none"). "none" trusts every loop fully: only with loops known to be
+            right (e.g. given by another system).
+        loop_kernel_width: its parameter k, in standard deviations (whitened units). Lower it
+            when false loops that pass verification pull the graph; raise it when true loops
+            are weighted down because the odometry covariance is too tight.
+        final_pass: batch pass of `optimize_final()`: "gnc", graduated non-convexity (odometry
+            and priors known inliers, loops plain Gaussian under the GNC loss; the loops it
+            weights down are rejected), "lm", Levenberg-Marquardt with the robust loop kernel,
+            or "none": the online ISAM2 estimate is the result (live use, where no batch pass
+            runs; relinearised more often, `ONLINE_ISAM2_RELINEARIZATION`).
     """
 
-    prior_sigmas: tuple[float, float, float] = DEFAULT_PRIOR_SIGMAS
+    REMOVED_KEYS: ClassVar[dict[str, str]] = REMOVED_KEYS
     loop_kernel: LoopKernel = "cauchy"
     loop_kernel_width: float = DEFAULT_LOOP_KERNEL_WIDTH
-    isam2_relinearize_threshold: float | None = None
-    isam2_relinearize_skip: int | None = None
-    isam2_iterations: int = DEFAULT_ISAM2_ITERATIONS
-    loop_update_interval: int = DEFAULT_LOOP_UPDATE_INTERVAL
-    settled_update_interval: int = DEFAULT_SETTLED_UPDATE_INTERVAL
-    settled_chi2: float = DEFAULT_SETTLED_CHI2
     final_pass: FinalPass = "gnc"
-    lm_max_iterations: int = DEFAULT_LM_MAX_ITERATIONS
-    lm_relative_error_tol: float = DEFAULT_LM_RELATIVE_ERROR_TOL
-    gnc_loss: GncLoss = "tls"
-    gnc_inlier_probability: float = DEFAULT_GNC_INLIER_PROBABILITY
 
     def __post_init__(self) -> None:
-        if len(self.prior_sigmas) != POSE_DIM:
-            raise ValueError(f"prior_sigmas: need 3 positive numbers, got {self.prior_sigmas}")
-        for sigma in self.prior_sigmas:
-            checks.positive("prior_sigmas", sigma)
         checks.one_of("loop_kernel", self.loop_kernel, ("cauchy", "huber", "none"))
         checks.one_of("final_pass", self.final_pass, ("lm", "gnc", "none"))
-        checks.one_of("gnc_loss", self.gnc_loss, ("tls", "gm"))
-        if self.isam2_relinearize_threshold is not None:
-            checks.non_negative("isam2_relinearize_threshold", self.isam2_relinearize_threshold)
         checks.positive("loop_kernel_width", self.loop_kernel_width)
-        if self.isam2_relinearize_skip is not None:
-            checks.at_least("isam2_relinearize_skip", self.isam2_relinearize_skip, 1)
-        checks.at_least("isam2_iterations", self.isam2_iterations, 1)
-        checks.at_least("loop_update_interval", self.loop_update_interval, 1)
-        checks.at_least("settled_update_interval", self.settled_update_interval, 1)
-        checks.non_negative("settled_chi2", self.settled_chi2)
-        checks.at_least("lm_max_iterations", self.lm_max_iterations, 1)
-        checks.positive("lm_relative_error_tol", self.lm_relative_error_tol)
-        checks.in_range("gnc_inlier_probability", self.gnc_inlier_probability, 0.0, 1.0, True, True)
 
     def isam2_relinearization(self) -> tuple[float, int]:
-        """The ISAM2 relinearisation threshold (m / rad) and check interval (updates) in effect:
-        the configured values, or for each one left None the default for `final_pass`."""
-        online = self.final_pass == "none"
-        threshold, skip = ONLINE_ISAM2_RELINEARIZATION if online else REFINED_ISAM2_RELINEARIZATION
-        if self.isam2_relinearize_threshold is not None:
-            threshold = self.isam2_relinearize_threshold
-        if self.isam2_relinearize_skip is not None:
-            skip = self.isam2_relinearize_skip
-        return threshold, skip
+        """The ISAM2 relinearisation threshold (m / rad) and check interval (updates) for
+        `final_pass`."""
+        return (
+            ONLINE_ISAM2_RELINEARIZATION
+            if self.final_pass == "none"
+            else (REFINED_ISAM2_RELINEARIZATION)
+        )
 
 
 @dataclass(frozen=True)
@@ -365,7 +345,7 @@ class PoseGraph:
     def _ensure_anchor(self) -> None:
         if not self._priors and self._first_key is not None and self._constraints:
             key = self._first_key
-            sigmas = np.asarray(self.config.prior_sigmas, dtype=np.float64)
+            sigmas = np.asarray(PRIOR_SIGMAS, dtype=np.float64)
             log.debug("anchoring keyframe %d with the default prior %s", key, sigmas)
             self.add_prior(key, self._initial[key], np.diag(sigmas**2))
 
@@ -414,7 +394,7 @@ class PoseGraph:
         isam = self._solver.isam
         try:
             result = isam.update(factors, values, list(self._pending_removals))
-            for _ in range(self.config.isam2_iterations - 1):
+            for _ in range(ISAM2_ITERATIONS - 1):
                 isam.update()
         except RuntimeError as exc:  # GTSAM's IndeterminantLinearSystemException and friends
             raise GraphError(f"ISAM2 update failed: {exc}") from None
@@ -460,19 +440,19 @@ class PoseGraph:
         for key in sorted(keys_used):
             initial.insert(key, pose2(current[key]))
         lm = gtsam.LevenbergMarquardtParams()
-        lm.setMaxIterations(cfg.lm_max_iterations)
-        lm.setRelativeErrorTol(cfg.lm_relative_error_tol)
-        lm.setAbsoluteErrorTol(DEFAULT_LM_ABSOLUTE_ERROR_TOL)
+        lm.setMaxIterations(LM_MAX_ITERATIONS)
+        lm.setRelativeErrorTol(LM_RELATIVE_ERROR_TOL)
+        lm.setAbsoluteErrorTol(LM_ABSOLUTE_ERROR_TOL)
         loops = [n for n in active if self._constraints[n].kind == "loop"]
         try:
             if use_gnc and loops:
                 params = gtsam.GncLMParams(lm)
-                loss = gtsam.GncLossType.TLS if cfg.gnc_loss == "tls" else gtsam.GncLossType.GM
+                loss = gtsam.GncLossType.TLS if GNC_LOSS == "tls" else gtsam.GncLossType.GM
                 params.setLossType(loss)
                 loop_factors = {factor_of[n] for n in loops}
                 params.setKnownInliers([f for f in range(graph.size()) if f not in loop_factors])
                 optimizer = gtsam.GncLMOptimizer(graph, initial, params)
-                optimizer.setInlierCostThresholdsAtProbability(cfg.gnc_inlier_probability)
+                optimizer.setInlierCostThresholdsAtProbability(GNC_INLIER_PROBABILITY)
                 result = optimizer.optimize()
                 weights = np.asarray(optimizer.getWeights(), dtype=np.float64)
                 self._loop_weights = {n: float(weights[factor_of[n]]) for n in loops}

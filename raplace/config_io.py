@@ -106,6 +106,11 @@ def _coerce(value: Any, hint: Any, where: str) -> Any:
             raise ConfigReadError(f"{where}: expected an integer, got {value!r}")
         return value
     if hint is bool:
+        if isinstance(value, dict):  # a former section of which only the switch is left
+            key = where.replace(": ", ".").rsplit(".", 1)[-1]
+            raise ConfigReadError(
+                f"{where}: is now a bool, not a mapping: write `{key}: true` or `{key}: false`"
+            )
         if not isinstance(value, bool):
             raise ConfigReadError(f"{where}: expected true or false, got {value!r}")
         return value

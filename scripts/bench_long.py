@@ -65,6 +65,7 @@ from radar_slam.datasets import open_sequence, registry
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.g2o import write_pose_graph
 from radar_slam.loops import LoopClosureConfig, LoopDetector, verification
+from radar_slam.loops.config import LOOP_RAPLACE
 from radar_slam.loops.verification import GeometricVerifier
 from radar_slam.pipeline import Pipeline, Progress, Results, load_config
 from radar_slam.sim.family import is_complete
@@ -410,7 +411,7 @@ def query_probe(
     """Descriptors of `PROBE_SOURCE_SCANS` scans spread over the first `frames`, grown to
     `keyframes` entries (`grown_database`); the query is the last scan, which revisits a place
     driven before."""
-    describe = DescriptorExtractor(config.raplace.descriptor)
+    describe = DescriptorExtractor(LOOP_RAPLACE.descriptor)
 
     def descriptor(index: int) -> np.ndarray:
         scan = sequence[index]
@@ -517,7 +518,7 @@ def main() -> None:
     recorder = Recorder(args.every)
     pipeline = Pipeline(sequence, config, max_frames=args.frames, progress=recorder)
     probe = query_probe(sequence, pipeline.frames, config.loop_closure, args.keyframes)
-    retrieval = config.loop_closure.raplace.retrieval
+    retrieval = LOOP_RAPLACE.retrieval
     # Before the run, in a child process (fresh, and its memory not counted in the peak here).
     with multiprocessing.get_context("fork").Pool(1) as pool:
         fresh_query_ms = pool.apply(standalone_query_ms, (probe, retrieval))

@@ -11,7 +11,11 @@ rate above `--turn-dps`), loops with the two scans facing the same or opposite w
 SLAM ATE and the loops accepted / true of the run, so one run shows both.
 
 Usage: python scripts/bench_nees.py [SEQ ...] [--data-root ROOT] [--stride 1 4]
-       [--config FILE.yaml] [--set section.key=value ...] [--json OUT]
+       [--config FILE.yaml] [--set section.key=value ...] [--loop-covariance key=value ...]
+       [--json OUT]
+
+`--loop-covariance` replaces terms of the loop covariance model, a constant of the method
+(`radar_slam.loops.verification.LOOP_COVARIANCE`, e.g. `sigma_scale=0.5`), for calibrating it.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import argparse
 import json
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +35,7 @@ from numpy.typing import NDArray
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.nees import FactorNees, factor_nees
+from radar_slam.loops import verification
 from radar_slam.loops.config import CHI2_3DOF_99
 from radar_slam.pipeline import Pipeline, Results, load_config
 from radar_slam.pipeline.steps import odometry_factor
@@ -131,6 +136,8 @@ def overrides_of(pairs: list[str]) -> dict[str, Any]:
 def bench(spec: str, stride: int, args: argparse.Namespace) -> dict[str, Any]:
     """Run the pipeline on `spec` at `stride`; print and return the NEES and accuracy."""
     config = load_config(spec.split("/")[0], args.config, overrides_of(args.set))
+    model = overrides_of(args.loop_covariance)
+    verification.LOOP_COVARIANCE = replace(verification.LOOP_COVARIANCE, **model)
     sequence = strided(open_sequence(spec, args.data_root), stride)
     results = Pipeline(sequence, config).run()
     truth = results.ground_truth_poses
@@ -168,6 +175,9 @@ def main() -> None:
     parser.add_argument("--stride", type=int, nargs="+", default=[1])
     parser.add_argument("--config", type=Path, default=None, help="a --config file of `run`")
     parser.add_argument("--set", action="append", default=[], help="section.key=value")
+    parser.add_argument(
+        "--loop-covariance", action="append", default=[], help="key=value of LOOP_COVARIANCE"
+    )
     parser.add_argument("--turn-dps", type=float, default=5.0, help="turning above [deg/s]")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()

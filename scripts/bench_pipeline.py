@@ -53,6 +53,7 @@ from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.false_loops import FalseLoopInjection
 from radar_slam.loops import GeometricVerifier, LoopDetector
+from radar_slam.loops.config import LOOP_RAPLACE
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
 from raplace import PlaceRecognizer
 
@@ -133,10 +134,14 @@ def run_once(
         injection = FalseLoopInjection(np.asarray(gt), inject, rng)
         # every candidate verified, however far the odometry puts it: the false loops get through
         cfg = dataclasses.replace(config.loop_closure, odometry_drift_fraction=np.inf)
-        recognizer = injection.recognizer(PlaceRecognizer(cfg.raplace.retrieval))
-        verifier = injection.verifier(GeometricVerifier(cfg))
+        recognizer = injection.recognizer(PlaceRecognizer(LOOP_RAPLACE.retrieval))
+        verifier = injection.verifier(GeometricVerifier(cfg, config.odometry))
         detector = LoopDetector(
-            cfg, scan_loader=lambda k: sequence[k], recognizer=recognizer, verifier=verifier
+            cfg,
+            scan_loader=lambda k: sequence[k],
+            recognizer=recognizer,
+            verifier=verifier,
+            odometry=config.odometry,
         )
     cpu = time.process_time()
     results = Pipeline(sequence, config, max_frames=max_frames, loop_detector=detector).run()

@@ -112,12 +112,15 @@ def main() -> None:
     if gt is None:
         raise SystemExit(f"{args.sequence} has no ground truth (its poses drive the detector)")
     n = len(sequence) if args.max_frames is None else min(args.max_frames, len(sequence))
-    cfg = load_config(sequence.family).loop_closure
+    config = load_config(sequence.family)
+    cfg = config.loop_closure
     profiler = cProfile.Profile() if args.profile > 0 else None
-    verifier = TimedVerifier(GeometricVerifier(cfg), profiler)
-    detector = LoopDetector(cfg, scan_loader=lambda k: sequence[k], verifier=verifier)
+    verifier = TimedVerifier(GeometricVerifier(cfg, config.odometry), profiler)
+    detector = LoopDetector(
+        cfg, scan_loader=lambda k: sequence[k], verifier=verifier, odometry=config.odometry
+    )
 
-    odometry = Odometry(load_config(sequence.family).odometry) if args.odometry else None
+    odometry = Odometry(config.odometry) if args.odometry else None
     read_s = detect_s = odometry_s = 0.0
     for index in range(n):
         start = time.process_time()

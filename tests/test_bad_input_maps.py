@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import logging
 from collections.abc import Callable
 from pathlib import Path
 
@@ -128,19 +127,11 @@ def test_map_info_json_is_strict_json(workdir: Path, capsys: pytest.CaptureFixtu
     assert info["extent_m"] == [16.0, 0.0]
 
 
-def test_localize_records_the_descriptor_it_runs_with(caplog: pytest.LogCaptureFixture) -> None:
-    """A config asking for n_theta 60 against a map made with 120: 120 runs, so 120 is what
-    the settings (and config.yaml) say, and a warning names the change."""
-    from radar_slam.maps.localizer import settings_for_map
-    from radar_slam.pipeline import load_config
-    from radar_slam.pipeline.config import PipelineConfig
+def test_queries_of_a_map_use_the_descriptor_it_was_made_with() -> None:
+    """A map made with n_theta 60 is queried with 60; one that records no descriptor settings,
+    with the loop closer's."""
+    from radar_slam.loops.config import LOOP_RAPLACE
+    from radar_slam.maps.localizer import descriptor_config_of
 
-    asked = load_config(
-        "synthetic", overrides={"loop_closure": {"raplace": {"descriptor": {"n_theta": 60}}}}
-    )
-    m = small_map(settings={"descriptor": {"n_theta": 120}})
-    with caplog.at_level(logging.WARNING):
-        used = settings_for_map(asked, m)
-    assert isinstance(used, PipelineConfig)
-    assert used.loop_closure.raplace.descriptor.n_theta == 120
-    assert "n_theta 60 -> 120" in caplog.text
+    assert descriptor_config_of(small_map(settings={"descriptor": {"n_theta": 60}})).n_theta == 60
+    assert descriptor_config_of(small_map(settings={})) == LOOP_RAPLACE.descriptor

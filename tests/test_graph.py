@@ -9,10 +9,12 @@ import gtsam
 import numpy as np
 import pytest
 
+from radar_slam import graph as graph_module
 from radar_slam.config import merge
 from radar_slam.errors import ConfigError, GraphError
 from radar_slam.graph import (
     ONLINE_ISAM2_RELINEARIZATION,
+    PRIOR_SIGMAS,
     REFINED_ISAM2_RELINEARIZATION,
     GraphConfig,
     LoopConstraint,
@@ -29,11 +31,8 @@ ODOMETRY_SIGMAS = np.array([0.05, 0.05, 0.005])
 LOOP_SIGMAS = np.array([0.1, 0.1, 0.01])
 ODOMETRY_COV = np.diag(ODOMETRY_SIGMAS**2)
 LOOP_COV = np.diag(LOOP_SIGMAS**2)
-# ISAM2 settings of a graph whose online estimate is the output
-ONLINE = {
-    "isam2_relinearize_threshold": ONLINE_ISAM2_RELINEARIZATION[0],
-    "isam2_relinearize_skip": ONLINE_ISAM2_RELINEARIZATION[1],
-}
+# a graph whose online estimate is the output (relinearised as such)
+ONLINE = GraphConfig(final_pass="none")
 
 # Synthetic two-lap circle with drifting odometry.
 CIRCLE_RADIUS_M = 30.0
@@ -88,7 +87,7 @@ def test_square_known_answer(closing: str, final_pass: str) -> None:
     assert pose_error(g.optimize_final(), truth) < 1e-3
     # ISAM2 relinearising as it does when its online estimate is the output: a few steps from the
     # perturbed guess reach the answer
-    g, truth = build_square(GraphConfig(final_pass=final_pass, **ONLINE), closing)
+    g, truth = build_square(ONLINE, closing)
     for _ in range(5):
         g.update()
     assert pose_error(g.estimates(), truth) < 1e-3
@@ -96,22 +95,11 @@ def test_square_known_answer(closing: str, final_pass: str) -> None:
 
 def test_isam2_relinearization_follows_final_pass() -> None:
     """Relinearisation is tight when the online estimate is the output, GTSAM's defaults when a
-    final pass refines it; a configured value wins over either."""
+    final pass refines it, and a final pass from the loosely relinearised online estimate reaches
+    the tight one's answer."""
     assert GraphConfig(final_pass="none").isam2_relinearization() == ONLINE_ISAM2_RELINEARIZATION
     assert GraphConfig().isam2_relinearization() == REFINED_ISAM2_RELINEARIZATION
     assert GraphConfig(final_pass="lm").isam2_relinearization() == REFINED_ISAM2_RELINEARIZATION
-    assert GraphConfig(isam2_relinearize_skip=3).isam2_relinearization() == (
-        REFINED_ISAM2_RELINEARIZATION[0],
-        3,
-    )
-    overrides = {"isam2_relinearize_threshold": 0.05, "final_pass": "none"}
-    read = merge(GraphConfig, GraphConfig(), overrides, "t.yaml")
-    assert read.isam2_relinearization() == (0.05, ONLINE_ISAM2_RELINEARIZATION[1])
-    back = merge(GraphConfig, read, {"isam2_relinearize_threshold": None}, "t.yaml")
-    assert back.isam2_relinearization() == ONLINE_ISAM2_RELINEARIZATION
-    with pytest.raises(ConfigError, match="t.yaml: isam2_relinearize_skip"):
-        merge(GraphConfig, GraphConfig(), {"isam2_relinearize_skip": 0}, "t.yaml")
-    # a final pass from the loosely relinearised online estimate reaches the tight one's answer
     g, truth = build_square(GraphConfig(), "4->0")
     for _ in range(5):
         g.update()
@@ -121,7 +109,7 @@ def test_isam2_relinearization_follows_final_pass() -> None:
 def test_residual_chi2_measures_what_a_loop_still_has_to_correct() -> None:
     """Before an update, a loop that agrees with the estimate has a small squared Mahalanobis
     distance; one 0.5 m off, with 0.05 m loop sigmas, about (0.5 / 0.05)^2 = 100."""
-    g, truth = build_square(GraphConfig(**ONLINE), "4->0")
+    g, truth = build_square(ONLINE, "4->0")
     for _ in range(5):
         g.update()
     loop_cov = np.diag(SQUARE_LOOP_SIGMAS**2)
@@ -140,7 +128,7 @@ def test_auto_prior_anchors_first_keyframe() -> None:
     g.update()
     (prior,) = g.priors()
     assert prior.key == 0
-    assert np.allclose(prior.covariance, np.diag(np.square(GraphConfig().prior_sigmas)))
+    assert np.allclose(prior.covariance, np.diag(np.square(PRIOR_SIGMAS)))
     explicit, _ = build_square(GraphConfig(), "4->0")
     explicit.add_prior(0, (1.0, 2.0, 0.5), np.diag([1e-4, 1e-4, 1e-6]))
     explicit.optimize_final()
@@ -165,9 +153,9 @@ def _noisy_small_graph(config: GraphConfig) -> PoseGraph:
     return g
 
 
-def test_isam2_equals_batch_lm() -> None:
-    config = GraphConfig(loop_kernel="none", final_pass="lm", **ONLINE)
-    config = dataclasses.replace(config, isam2_relinearize_threshold=0.0)
+def test_isam2_equals_batch_lm(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(graph_module, "REFINED_ISAM2_RELINEARIZATION", (0.0, 1))
+    config = GraphConfig(loop_kernel="none", final_pass="lm")
     g = _noisy_small_graph(config)
     for _ in range(6):
         g.update()
@@ -206,8 +194,10 @@ def test_keyframe_without_factor_stays_pending() -> None:
         g.marginal_covariance(2)
 
 
-def test_remove_loop_restores_clean_solution() -> None:
-    config = GraphConfig(loop_kernel="none", isam2_relinearize_threshold=0.0)
+def test_remove_loop_restores_clean_solution(monkeypatch: pytest.MonkeyPatch) -> None:
+    skip = REFINED_ISAM2_RELINEARIZATION[1]
+    monkeypatch.setattr(graph_module, "REFINED_ISAM2_RELINEARIZATION", (0.0, skip))
+    config = GraphConfig(loop_kernel="none")
     clean = _noisy_small_graph(config)
     for _ in range(4):
         clean.update()
@@ -472,14 +462,12 @@ def test_graph_errors() -> None:
 
 
 def test_config_validation_and_yaml_merge() -> None:
-    cfg = merge(
-        GraphConfig, GraphConfig(), {"loop_kernel": "huber", "prior_sigmas": [1, 1, 0.1]}, "t"
-    )
+    cfg = merge(GraphConfig, GraphConfig(), {"loop_kernel": "huber", "loop_kernel_width": 2}, "t")
     assert cfg.loop_kernel == "huber"
-    assert cfg.prior_sigmas == (1.0, 1.0, 0.1)
+    assert cfg.loop_kernel_width == 2.0
     with pytest.raises(ConfigError, match="loop_kernel"):
         merge(GraphConfig, GraphConfig(), {"loop_kernel": "tukey"}, "t")
-    with pytest.raises(ValueError, match="prior_sigmas"):
-        dataclasses.replace(GraphConfig(), prior_sigmas=(1.0, 0.0, 1.0))
-    with pytest.raises(ValueError, match="gnc_inlier_probability"):
-        GraphConfig(gnc_inlier_probability=1.0)
+    with pytest.raises(ConfigError, match="t: key 'prior_sigmas' is gone: .*graph.PRIOR_SIGMAS"):
+        merge(GraphConfig, GraphConfig(), {"prior_sigmas": [1, 1, 0.1]}, "t")
+    with pytest.raises(ValueError, match="loop_kernel_width"):
+        GraphConfig(loop_kernel_width=0.0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from radar_slam.loops import StretchThrottle, ThrottleConfig
-from radar_slam.loops.throttle import direction_of
+from radar_slam.loops.throttle import CLOSED_AFTER, direction_of
 
 SPACING_M = 4.0  # database / query spacing along the path [m]
 FIRST_DRIVE_M = 400.0  # the revisited road, driven first from path 0 to here
@@ -48,15 +48,15 @@ def revisit(sim: Simulation, length_m: float, reverse: bool = False) -> None:
 
 @pytest.mark.parametrize("reverse", [False, True])
 def test_verifications_along_a_closed_stretch_are_bounded(reverse: bool) -> None:
-    cfg = ThrottleConfig(closed_after=3, closed_spacing_m=20.0)
+    cfg = ThrottleConfig(closed_spacing_m=20.0)
     sim = Simulation(cfg)
     revisit(sim, 360.0, reverse)
     queries = int(360.0 / SPACING_M)
     # Three loops close the stretch, then one verification per 20 m (the query spacing rounds
     # 20 m up to 20 or 24 m).
-    assert cfg.closed_after + 360.0 / 20.0 >= len(sim.verified) >= 360.0 / 24.0
+    assert CLOSED_AFTER + 360.0 / 20.0 >= len(sim.verified) >= 360.0 / 24.0
     assert sim.throttle.skipped == queries - len(sim.verified)
-    gaps = np.diff(sim.verified[cfg.closed_after :])
+    gaps = np.diff(sim.verified[CLOSED_AFTER:])
     assert np.all(gaps >= cfg.closed_spacing_m) and np.all(gaps <= cfg.closed_spacing_m + SPACING_M)
     (stretch,) = sim.throttle.stretches
     assert stretch.direction == (-1 if reverse else 1)
@@ -69,7 +69,7 @@ def test_no_throttling_when_disabled() -> None:
 
 
 def test_candidates_off_the_stretch_and_failures_return_to_full_rate() -> None:
-    cfg = ThrottleConfig(closed_after=3, closed_spacing_m=20.0)
+    cfg = ThrottleConfig(closed_spacing_m=20.0)
     sim = Simulation(cfg)
     revisit(sim, 100.0)
     assert sim.throttle.skipped > 0
@@ -89,7 +89,7 @@ def test_candidates_off_the_stretch_and_failures_return_to_full_rate() -> None:
 
 
 def test_a_rejected_loop_on_the_stretch_ends_it() -> None:
-    sim = Simulation(ThrottleConfig(closed_after=3, closed_spacing_m=20.0))
+    sim = Simulation(ThrottleConfig(closed_spacing_m=20.0))
     revisit(sim, 100.0)
     throttle = sim.throttle
     q = REVISIT_START_M + 120.0
@@ -102,7 +102,7 @@ def test_a_rejected_loop_on_the_stretch_ends_it() -> None:
 
 
 def test_a_stretch_is_forgotten_after_max_gap() -> None:
-    cfg = ThrottleConfig(closed_after=3, closed_spacing_m=20.0, max_gap_m=100.0)
+    cfg = ThrottleConfig(closed_spacing_m=20.0)
     sim = Simulation(cfg)
     revisit(sim, 100.0)
     last = sim.throttle.stretches[0].query_path_m
@@ -114,7 +114,7 @@ def test_a_stretch_is_forgotten_after_max_gap() -> None:
 
 def test_a_third_drive_keeps_a_stretch_per_earlier_drive() -> None:
     """Best candidates alternating between two earlier drives of the road still throttle."""
-    cfg = ThrottleConfig(closed_after=3, closed_spacing_m=20.0)
+    cfg = ThrottleConfig(closed_spacing_m=20.0)
     sim = Simulation(cfg)
     second_drive_offset = 500.0  # the road's second drive started at path 500 m
     for n in range(100):
@@ -123,7 +123,7 @@ def test_a_third_drive_keeps_a_stretch_per_earlier_drive() -> None:
         match = along + (second_drive_offset if n % 2 else 0.0)
         sim.query(q, match, match)
     assert len(sim.throttle.stretches) == 2
-    assert len(sim.verified) <= 2 * cfg.closed_after + 400.0 / 20.0
+    assert len(sim.verified) <= 2 * CLOSED_AFTER + 400.0 / 20.0
 
 
 def test_direction_from_the_loop_yaw() -> None:
@@ -132,7 +132,7 @@ def test_direction_from_the_loop_yaw() -> None:
 
 
 def test_anchor_is_the_latest_loop_of_the_closed_stretch_the_match_lies_on() -> None:
-    cfg = ThrottleConfig(closed_after=3, closed_spacing_m=20.0)
+    cfg = ThrottleConfig(closed_spacing_m=20.0)
     sim = Simulation(cfg)
     throttle = sim.throttle
     revisit(sim, 8.0)  # two loops: the stretch is not closed yet

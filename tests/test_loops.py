@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from odometry import OdometryConfig
 from odometry.registration import HINT_RADIUS_M, prepare, register
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.evaluation.truth import is_true_loop
@@ -26,11 +27,16 @@ from radar_slam.loops import (
     Verification,
     VerifiedLoop,
     Verifier,
+    consistency,
     cycle_mahalanobis,
     loop_covariance,
     make_loop_detector,
     motion_compensated,
+    verification,
 )
+from radar_slam.loops import detector as detector_module
+from radar_slam.loops.config import LOOP_RAPLACE
+from radar_slam.loops.throttle import CLOSED_AFTER
 from radar_slam.loops.tracking import predicted_loop
 from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import generate_sequence
@@ -122,9 +128,11 @@ def test_loop_covariance_grows_as_quality_falls() -> None:
     assert np.trace(disagree) > np.trace(floor)
 
 
-def test_a_loop_swept_across_a_yaw_rate_step_is_rejected(tiny: RadarSequence) -> None:
+def test_a_loop_swept_across_a_yaw_rate_step_is_rejected(
+    tiny: RadarSequence, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A scan whose yaw rate changes by 40 deg/s across its sweep (a curvature step) gets a
-    rotation sigma of several degrees; over `max_sigma_yaw_deg` the loop is rejected, saying
+    rotation sigma of several degrees; over `MAX_SIGMA_YAW_DEG` the loop is rejected, saying
     why, and without the limit the same loop is accepted with that sigma."""
     step = np.array([0.0, 0.0, np.deg2rad(40.0)])
     query = dataclasses.replace(key_scan(tiny, 40), twist_change=step)
@@ -132,12 +140,9 @@ def test_a_loop_swept_across_a_yaw_rate_step_is_rejected(tiny: RadarSequence) ->
     rejected = GeometricVerifier(LoopClosureConfig())(query, match)
     assert not rejected.ok
     assert "rotation too uncertain" in rejected.reason
-    unlimited = LoopClosureConfig(
-        verification=dataclasses.replace(
-            LoopClosureConfig().verification, max_sigma_yaw_deg=float("inf")
-        )
-    )
-    accepted = GeometricVerifier(unlimited)(query, match)
+    with monkeypatch.context() as unlimited:
+        unlimited.setattr(verification, "MAX_SIGMA_YAW_DEG", float("inf"))
+        accepted = GeometricVerifier(LoopClosureConfig())(query, match)
     assert accepted.ok, accepted.reason
     assert np.rad2deg(np.sqrt(accepted.covariance[2, 2])) > 2.0
     steady = GeometricVerifier(LoopClosureConfig())(key_scan(tiny, 40), match)
@@ -184,9 +189,12 @@ def test_a_query_de_skewed_off_at_one_hertz_gets_its_yaw_rate_searched(
     assert rotation_error_deg(verified(0.0, 1.0)) < 0.2
 
 
-def test_verified_covariance_reflects_the_match_quality(tiny: RadarSequence) -> None:
+def test_verified_covariance_reflects_the_match_quality(
+    tiny: RadarSequence, monkeypatch: pytest.MonkeyPatch
+) -> None:
     peak_only = LoopCovarianceConfig(disagreement_weight=0.0, min_sigma_xy_m=1e-3)
-    verify = GeometricVerifier(LoopClosureConfig(covariance=peak_only))
+    monkeypatch.setattr(verification, "LOOP_COVARIANCE", peak_only)
+    verify = GeometricVerifier(LoopClosureConfig())
     clean = verify(key_scan(tiny, 40), key_scan(tiny, 37))
     frame = tiny[37]
     rng = np.random.default_rng(0)
@@ -268,7 +276,7 @@ def test_gate_accepts_consistent_loops_and_rejects_contradictions() -> None:
     # A lone loop far from the others expires unsupported.
     q4, m4 = first + 100, 110
     assert gate.add(loop(3, q4, m4, between(gt[q4], gt[m4]), odo, path)) == {3: "pending"}
-    assert gate.expire(path[q4] + ConsistencyConfig().window_m + 1.0) == {3: "rejected"}
+    assert gate.expire(path[q4] + consistency.WINDOW_M + 1.0) == {3: "rejected"}
     assert "unsupported" in gate.reasons[3]
 
 
@@ -276,12 +284,11 @@ def test_cycle_mahalanobis_is_small_for_true_and_large_for_false_loops() -> None
     gt = square_laps()
     odo = drifting_odometry(gt, np.deg2rad(0.1), seed=2)  # 24 deg drift per lap
     path = path_lengths(odo)
-    cfg = ConsistencyConfig()
     a = loop(0, 250, 10, between(gt[250], gt[10]), odo, path)
     b = loop(1, 256, 16, between(gt[256], gt[16]), odo, path)
     bad = loop(2, 256, 16, compose(between(gt[256], gt[16]), np.array([3.0, 0, 0])), odo, path)
-    assert cycle_mahalanobis(b, [a], cfg)[0] < cfg.chi2_threshold
-    assert cycle_mahalanobis(bad, [a], cfg)[0] > cfg.chi2_threshold
+    assert cycle_mahalanobis(b, [a])[0] < consistency.CHI2_THRESHOLD
+    assert cycle_mahalanobis(bad, [a])[0] > consistency.CHI2_THRESHOLD
 
 
 def spin_scenario(segments: bool) -> dict[int, str]:
@@ -434,7 +441,7 @@ def run_revisit(
         )
 
     wrong_key = n - 1  # the far end of the first pass
-    recognizer = InjectOnce(PlaceRecognizer(cfg.raplace.retrieval), n + 5, wrong_key)
+    recognizer = InjectOnce(PlaceRecognizer(LOOP_RAPLACE.retrieval), n + 5, wrong_key)
     detector = LoopDetector(cfg, recognizer=recognizer, verifier=verifier)
     accepted = []
     for key, (k, shift) in enumerate(scans):
@@ -490,7 +497,7 @@ def test_throttled_detector_verifies_a_closed_stretch_sparsely(
 ) -> None:
     """The same revisit throttled: once three loops closed the stretch, a query is verified once
     per 10 m of travel (the revisit is 50 m long); every accepted loop stays true."""
-    throttle = ThrottleConfig(closed_after=3, closed_spacing_m=10.0)
+    throttle = ThrottleConfig(closed_spacing_m=10.0)
     run = run_revisit(tiny, dataclasses.replace(EVERY_SCAN_QUERIES, throttle=throttle))
     assert_accepted_loops_true(tiny, run)
     detector, before = run.detector, unthrottled.detector
@@ -501,9 +508,9 @@ def test_throttled_detector_verifies_a_closed_stretch_sparsely(
     gt = tiny.ground_truth
     assert gt is not None
     revisit_m = float(path_lengths(np.asarray(gt)[1 : len(tiny) // 2])[-1])
-    bound = throttle.closed_after + 2 + revisit_m / throttle.closed_spacing_m
+    bound = CLOSED_AFTER + 2 + revisit_m / throttle.closed_spacing_m
     assert len(verified_keys) <= bound < revisit_queries
-    assert len(run.accepted) >= throttle.closed_after
+    assert len(run.accepted) >= CLOSED_AFTER
 
 
 def test_null_detector_does_nothing(tiny: RadarSequence) -> None:
@@ -568,18 +575,19 @@ class FailingRefiner:
         return Verification(False, "always", initial, np.full((3, 3), np.nan), initial, np.nan)
 
 
-def test_closed_stretch_candidates_are_checked_from_their_prediction(tiny: RadarSequence) -> None:
+def test_closed_stretch_candidates_are_checked_from_their_prediction(
+    tiny: RadarSequence, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Throttled revisit: candidates on the closed stretch are checked from the prediction, and
     the loops are those verified in full (pairs, statuses; measurements within 2 cm / 0.1 deg);
     a check that fails falls back to the full verification."""
-    throttle = ThrottleConfig(closed_after=3, closed_spacing_m=10.0)
+    throttle = ThrottleConfig(closed_spacing_m=10.0)
     cfg = dataclasses.replace(EVERY_SCAN_QUERIES, throttle=throttle)
     runs = {}
     for label, checks in (("predicted", True), ("full", False)):
-        run_cfg = dataclasses.replace(
-            cfg, throttle=dataclasses.replace(throttle, predicted_checks=checks)
-        )
-        runs[label] = run_revisit(tiny, run_cfg)
+        with monkeypatch.context() as patch:
+            patch.setattr(detector_module, "PREDICTED_CHECKS", checks)
+            runs[label] = run_revisit(tiny, cfg)
     predicted, full = runs["predicted"].detector, runs["full"].detector
     assert predicted.predicted >= 1 and predicted.predicted_failed == 0 and full.predicted == 0
     assert_accepted_loops_true(tiny, runs["predicted"])
@@ -608,7 +616,7 @@ def test_registration_seeded_with_a_prediction_matches_the_global_search(
     """`odometry.register` with a hint between the reference times (the loop checks from a
     prediction, 0.6 m off here) finds the motion of the global search, within 1 cm / 0.15 deg
     (reduced bins), and as close to the truth; one far off leads it astray."""
-    cfg = LoopClosureConfig().refinement
+    cfg = OdometryConfig()
     ref, cur = (prepare(tiny[k], cfg, twist(tiny, k)) for k in (40, 36))
     free = register(ref, cur, cfg)
     seeded = register(ref, cur, cfg, compose(free.motion, np.array([0.5, -0.4, 0.0])))

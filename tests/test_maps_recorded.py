@@ -115,14 +115,14 @@ def test_run_builds_its_map_without_decoding_a_scan_again(tiny_loop: RadarSequen
 def test_keyframes_kept_with_other_settings_are_made_again(
     recorded_run: Results, tiny_loop: RadarSequence
 ) -> None:
-    # A map wanted with other image settings than the run kept: read from the sequence.
-    maps = recorded_run.config.maps
-    smaller = dataclasses.replace(maps, image=dataclasses.replace(maps.image, size_px=200))
-    config = dataclasses.replace(recorded_run.config, maps=smaller)
+    # A map wanted with another keyframe spacing than the run kept: read from the sequence.
+    sparser = dataclasses.replace(recorded_run.config.maps, keyframe_spacing_m=8.0)
+    config = dataclasses.replace(recorded_run.config, maps=sparser)
     counted = CountedSequence(tiny_loop)
     the_map = build_map(dataclasses.replace(recorded_run, config=config), counted)
     assert sorted(counted.decodes) == list(the_map.keyframes["scan"])
-    assert the_map.settings["image"]["size_px"] == 200
+    assert the_map.settings["keyframe_spacing_m"] == 8.0
+    assert len(the_map) < len(recorded_run.map_keyframes.records)  # type: ignore[union-attr]
 
 
 def test_a_run_without_records_needs_its_sequence(tiny_loop: RadarSequence) -> None:

@@ -23,6 +23,7 @@ from radar_slam.loops import (
     GeometricVerifier,
     LoopDetector,
 )
+from radar_slam.loops.config import LOOP_RAPLACE
 from radar_slam.pipeline import (
     Pipeline,
     PipelineConfig,
@@ -30,6 +31,7 @@ from radar_slam.pipeline import (
     close_loops_on_graph,
     load_config,
 )
+from radar_slam.pipeline import slam as runner
 from radar_slam.trajectory import Trajectory
 from raplace.retrieval import PlaceRecognizer
 from raplace.se2 import between
@@ -69,8 +71,8 @@ def test_a_revisit_closes_the_loop_and_the_ate_drops(tiny_loop: RadarSequence, b
 def test_loops_batched_into_fewer_isam2_updates_give_the_same_result(
     tiny_loop: RadarSequence, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """ISAM2 runs at most every `graph.loop_update_interval` (10) scans, and every
-    `graph.settled_update_interval` (100) while the new loops agree with the estimate, instead of
+    """ISAM2 runs at most every `LOOP_UPDATE_INTERVAL` (10) scans, and every
+    `SETTLED_UPDATE_INTERVAL` (100) while the new loops agree with the estimate, instead of
     after every scan with new loops: the same loops, and the final batch pass lands on the same
     trajectory."""
     updates: list[int] = []
@@ -82,26 +84,23 @@ def test_loops_batched_into_fewer_isam2_updates_give_the_same_result(
 
     monkeypatch.setattr(PoseGraph, "update", counted)
     config = load_config("synthetic")
-    every_scan = dataclasses.replace(
-        config,
-        graph=dataclasses.replace(config.graph, loop_update_interval=1, settled_update_interval=1),
-    )
-    eager = Pipeline(tiny_loop, every_scan).run()
+    with monkeypatch.context() as every_scan:
+        every_scan.setattr(runner, "LOOP_UPDATE_INTERVAL", 1)
+        every_scan.setattr(runner, "SETTLED_UPDATE_INTERVAL", 1)
+        eager = Pipeline(tiny_loop, config).run()
     eager_updates = len(updates)
     updates.clear()
     batched = Pipeline(tiny_loop, config).run()
-    assert config.graph.loop_update_interval == 10
-    assert config.graph.settled_update_interval == 100
     assert len(updates) < eager_updates
     during_run = [n for n in updates if n < len(tiny_loop)]  # not the final ones
-    assert np.all(np.diff(during_run) >= config.graph.loop_update_interval)
+    assert np.all(np.diff(during_run) >= runner.LOOP_UPDATE_INTERVAL)
     assert batched.metrics.loops_accepted == eager.metrics.loops_accepted >= 3
     # A loop that agreed with the estimate waited longer than 10 scans for its update.
     lag = config.concurrency.loop_lag_scans
     frames = len(tiny_loop)
     added = sorted({min(d.query_key + lag + 1, frames) for d in batched.accepted_loops})
     waits = [min(n for n in updates if n >= k) - k for k in added]
-    assert max(waits) > config.graph.loop_update_interval
+    assert max(waits) > runner.LOOP_UPDATE_INTERVAL
     offsets = np.hypot(*(batched.slam.poses[:, :2] - eager.slam.poses[:, :2]).T)
     assert offsets.max() < 1e-3, offsets.max()
 
@@ -120,8 +119,9 @@ def test_thirty_percent_false_loops_raise_the_ate_at_most_ten_percent(
     detector = LoopDetector(
         cfg,
         scan_loader=lambda k: tiny_loop[k],
-        recognizer=injection.recognizer(PlaceRecognizer(cfg.raplace.retrieval)),
-        verifier=injection.verifier(GeometricVerifier(cfg)),
+        recognizer=injection.recognizer(PlaceRecognizer(LOOP_RAPLACE.retrieval)),
+        verifier=injection.verifier(GeometricVerifier(cfg, config.odometry)),
+        odometry=config.odometry,
     )
     injected = Pipeline(tiny_loop, config, loop_detector=detector).run()
     assert len(injection.passed) >= 5  # false loops did pass the (fake) verification
@@ -154,14 +154,14 @@ def test_config_layers_and_strictness(tmp_path: Path) -> None:
     assert load_config("synthetic") == default  # the shipped file only comments
     override = tmp_path / "override.yaml"
     override.write_text(
-        "loop_closure:\n  candidates: 4\n  verification: {max_disagreement_m: 2.5}\n"
+        "loop_closure:\n  candidates: 4\n  verification: {max_translation_m: 12.5}\n"
         "graph: {final_pass: lm}\nodometry: {keyframe: {max_frames: 4}}\n"
     )
     config = load_config("synthetic", override)
     assert config.loop_closure.candidates == 4
-    assert config.loop_closure.verification.max_disagreement_m == 2.5
+    assert config.loop_closure.verification.max_translation_m == 12.5
     assert config.graph.final_pass == "lm" and config.odometry.keyframe.max_frames == 4
-    assert config.loop_closure.raplace == default.loop_closure.raplace  # untouched sections stay
+    assert config.maps == default.maps  # untouched sections stay
     typo = tmp_path / "typo.yaml"
     typo.write_text("loop_closure:\n  candidatse: 4\n")
     with pytest.raises(ConfigError, match="candidatse"):

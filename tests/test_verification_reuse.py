@@ -49,16 +49,15 @@ def assert_same(a: Verification, b: Verification) -> None:
     assert a.refined_quality == b.refined_quality
 
 
-def fresh(sequence: RadarSequence, cfg: LoopClosureConfig | None = None) -> Verification:
-    verifier = GeometricVerifier(LoopClosureConfig() if cfg is None else cfg)
+def fresh(sequence: RadarSequence, odometry: OdometryConfig | None = None) -> Verification:
+    verifier = GeometricVerifier(LoopClosureConfig(), odometry)
     return verifier(key_scan(sequence, QUERY), key_scan(sequence, MATCH))
 
 
 def test_an_offered_scan_prepared_alike_gives_the_same_verification(tiny: RadarSequence) -> None:
-    cfg = LoopClosureConfig()
     query = key_scan(tiny, QUERY)
-    verifier = GeometricVerifier(cfg)
-    verifier.offer(QUERY, prepare(query.scan, cfg.refinement, query.twist))
+    verifier = GeometricVerifier(LoopClosureConfig())
+    verifier.offer(QUERY, prepare(query.scan, OdometryConfig(), query.twist))
     result = verifier(query, key_scan(tiny, MATCH))
     assert verifier.reused == 1
     assert result.ok, result.reason
@@ -82,26 +81,26 @@ def test_the_odometrys_conditioned_scan_gives_the_same_loop(tiny: RadarSequence)
 
 
 def test_only_a_matching_offer_is_used_and_only_the_latest_are_kept(tiny: RadarSequence) -> None:
-    cfg = LoopClosureConfig()
+    cfg, odometry = LoopClosureConfig(), OdometryConfig()
     assert OFFERS_KEPT == 2
     verifier = GeometricVerifier(cfg)
     for k in (QUERY, QUERY + 1):  # the offer of the next scan is in when a query is verified
         scan = key_scan(tiny, k)
-        verifier.offer(k, prepare(scan.scan, cfg.refinement, scan.twist))
+        verifier.offer(k, prepare(scan.scan, odometry, scan.twist))
     result = verifier(key_scan(tiny, QUERY), key_scan(tiny, MATCH))
     assert verifier.reused == 1
     assert_same(result, fresh(tiny))
     verifier = GeometricVerifier(cfg)
     for k in (QUERY, QUERY + 1, QUERY + 2):  # the third drops the first
         scan = key_scan(tiny, k)
-        verifier.offer(k, prepare(scan.scan, cfg.refinement, scan.twist))
+        verifier.offer(k, prepare(scan.scan, odometry, scan.twist))
     result = verifier(key_scan(tiny, QUERY), key_scan(tiny, MATCH))
     assert verifier.reused == 0
     assert_same(result, fresh(tiny))
     # A key whose scan is another one (another timestamp) is not used either.
     other = key_scan(tiny, QUERY + 2)
     verifier = GeometricVerifier(cfg)
-    verifier.offer(QUERY, prepare(other.scan, cfg.refinement, other.twist))
+    verifier.offer(QUERY, prepare(other.scan, odometry, other.twist))
     assert_same(verifier(key_scan(tiny, QUERY), key_scan(tiny, MATCH)), fresh(tiny))
     assert verifier.reused == 0
 
@@ -110,15 +109,13 @@ def test_other_refinement_settings_reuse_only_the_conditioning(tiny: RadarSequen
     """Same conditioning, other registration settings: the conditioned polar scan is reused and
     the result is that of the verifier's own settings; other conditioning: not reused."""
     base = OdometryConfig()
-    cfg = LoopClosureConfig(
-        refinement=dataclasses.replace(base, fine=dataclasses.replace(base.fine, cell_m=0.3))
-    )
+    finer = dataclasses.replace(base, fine=dataclasses.replace(base.fine, cell_m=0.3))
     query = key_scan(tiny, QUERY)
-    verifier = GeometricVerifier(cfg)
+    verifier = GeometricVerifier(LoopClosureConfig(), finer)
     verifier.offer(QUERY, prepare(query.scan, base, query.twist))
     result = verifier(query, key_scan(tiny, MATCH))
     assert verifier.reused == 1
-    assert_same(result, fresh(tiny, cfg))
+    assert_same(result, fresh(tiny, finer))
 
     other = dataclasses.replace(
         base, preprocess=dataclasses.replace(base.preprocess, bin_size_m=0.4)

@@ -22,7 +22,7 @@ from radar_slam.commands.options import (
 from radar_slam.config import write_yaml
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import Map
-from radar_slam.maps.localizer import Localization, Localizer, settings_for_map
+from radar_slam.maps.localizer import Localization, Localizer
 from radar_slam.maps.writers import localization_summary, map_info, write_localization
 from radar_slam.outputs import json_text
 from radar_slam.pipeline import frame_count, ground_truth_of, open_configured, sequence_label
@@ -47,7 +47,6 @@ def localize_command(
     check_output_root(out)
     the_map = Map.load(map_path)
     seq, settings = open_configured(sequence, data_root, config)
-    settings = settings_for_map(settings, the_map)  # what runs, and so what config.yaml says
     check_result_location(seq.family, f"{seq.name}_localize", out)  # before the work
     total = frame_count(seq, max_frames)
     localizer = Localizer(the_map, settings)

@@ -4,7 +4,7 @@ Two loops (qa, ma, za) and (qb, mb, zb) agree when za * T_ma_mb = T_qa_qb * zb w
 covariance of the two loops and of the odometry segments between their queries and between their
 matches (which grows with the segments' length). A loop is accepted once `min_support` other loops
 agree with it; until then it is pending; it is rejected when it contradicts every accepted loop
-nearby, or when the query has moved `window_m` on without support. Two loops judge each other
+nearby, or when the query has moved `WINDOW_M` on without support. Two loops judge each other
 only when no odometry step between their queries, nor between their matches, moved or turned
 faster than a vehicle can (`odometry.recovery.plausible_twist`; `VerifiedLoop.query_segment` /
 `match_segment`): across such a step the odometry poses are not trusted, and a loop measured
@@ -19,28 +19,44 @@ from bisect import bisect_left
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from radar_slam.loops.config import ConsistencyConfig
+from radar_slam.loops.config import CHI2_3DOF_99, ConsistencyConfig
 from radar_slam.loops.records import LoopStatus, VerifiedLoop
 from raplace import adjoint, between, compose, wrap_angle
 
 FloatArray = NDArray[np.float64]
 POSE_DIM = 3
+WINDOW_M = 60.0
+"""Loops support each other when their queries and their matches each lie within this path
+distance [m]; a pending loop is rejected once the query has travelled this far past it without
+support (a loop every `query_spacing_m` on a revisit finds its support well inside it)."""
+CHI2_THRESHOLD = CHI2_3DOF_99
+"""Two loops agree when the squared Mahalanobis distance of their cycle is below this (3 dof,
+99 %: one true pair in a hundred is refused)."""
+DRIFT_FRACTION = 0.02
+"""Odometry translation error per metre travelled of the segments between two loops (2 %: twice
+a typical radar odometry drift; 5 % let pairs of random false loops agree by chance)."""
+DRIFT_DEG_PER_M = 0.05
+"""Odometry rotation error per metre travelled [deg/m]."""
+MIN_SIGMA_XY_M = 0.1
+"""Translation standard deviation of a zero-length segment [m]."""
+MIN_SIGMA_YAW_DEG = 0.2
+"""Rotation standard deviation of a zero-length segment [deg]."""
 
 
-def odometry_segment_covariance(path_m: ArrayLike, cfg: ConsistencyConfig) -> FloatArray:
-    """(..., 3, 3) diagonal covariance of odometry segments `path_m` (...) metres long."""
+def odometry_segment_covariance(path_m: ArrayLike) -> FloatArray:
+    """(..., 3, 3) diagonal covariance of odometry segments `path_m` (...) metres long: standard
+    deviations `DRIFT_FRACTION` * length + `MIN_SIGMA_XY_M` (x and y) and `DRIFT_DEG_PER_M` *
+    length + `MIN_SIGMA_YAW_DEG` (yaw)."""
     length = np.abs(np.asarray(path_m, dtype=np.float64))
-    sigma_xy = cfg.drift_fraction * length + cfg.min_sigma_xy_m
-    sigma_yaw = np.deg2rad(cfg.drift_deg_per_m * length + cfg.min_sigma_yaw_deg)
+    sigma_xy = DRIFT_FRACTION * length + MIN_SIGMA_XY_M
+    sigma_yaw = np.deg2rad(DRIFT_DEG_PER_M * length + MIN_SIGMA_YAW_DEG)
     cov = np.zeros(length.shape + (POSE_DIM, POSE_DIM))
     cov[..., 0, 0] = cov[..., 1, 1] = sigma_xy**2
     cov[..., 2, 2] = sigma_yaw**2
     return cov
 
 
-def cycle_mahalanobis(
-    loop: VerifiedLoop, others: list[VerifiedLoop], cfg: ConsistencyConfig
-) -> FloatArray:
+def cycle_mahalanobis(loop: VerifiedLoop, others: list[VerifiedLoop]) -> FloatArray:
     """Squared Mahalanobis distances (n,) of the cycles closed by `loop` with each of `others`.
 
     For loops a (qa, ma, za) and b (qb, mb, zb) the cycle error is
@@ -68,8 +84,8 @@ def cycle_mahalanobis(
     ad_zb = adjoint(between(zb, np.zeros(3)))  # Ad(zb^-1)
     cov = (
         ad_m @ sa @ np.swapaxes(ad_m, -1, -2)
-        + odometry_segment_covariance(path_m, cfg)
-        + ad_zb @ odometry_segment_covariance(path_q, cfg) @ ad_zb.T
+        + odometry_segment_covariance(path_m)
+        + ad_zb @ odometry_segment_covariance(path_q) @ ad_zb.T
         + sb
     )
     solved = np.linalg.solve(cov, error[..., None])[..., 0]
@@ -106,7 +122,7 @@ class ConsistencyGate:
         cfg = self.cfg
         first = 0
         if self._in_path_order:  # only the loops whose query lies within the window
-            first = bisect_left(self._query_paths, loop.query_path_m - cfg.window_m)
+            first = bisect_left(self._query_paths, loop.query_path_m - WINDOW_M)
         live = [
             n
             for n, other in enumerate(self._loops[first:], start=first)
@@ -114,11 +130,11 @@ class ConsistencyGate:
             and other.query_key != loop.query_key
             and other.query_segment == loop.query_segment
             and other.match_segment == loop.match_segment
-            and abs(loop.query_path_m - other.query_path_m) <= cfg.window_m
-            and abs(loop.match_path_m - other.match_path_m) <= cfg.window_m
+            and abs(loop.query_path_m - other.query_path_m) <= WINDOW_M
+            and abs(loop.match_path_m - other.match_path_m) <= WINDOW_M
         ]
-        d2 = cycle_mahalanobis(loop, [self._loops[n] for n in live], cfg)
-        agree = [n for n, d in zip(live, d2, strict=True) if d <= cfg.chi2_threshold]
+        d2 = cycle_mahalanobis(loop, [self._loops[n] for n in live])
+        agree = [n for n, d in zip(live, d2, strict=True) if d <= CHI2_THRESHOLD]
         accepted_near = [n for n in live if self._status[n] == "accepted"]
         accepted_agree = [n for n in agree if self._status[n] == "accepted"]
 
@@ -135,7 +151,7 @@ class ConsistencyGate:
                 index,
                 "rejected",
                 f"inconsistent with {len(accepted_near)} accepted loop(s) nearby "
-                f"(best cycle d2 {worst:.1f} > {cfg.chi2_threshold:.1f})",
+                f"(best cycle d2 {worst:.1f} > {CHI2_THRESHOLD:.1f})",
                 changes,
             )
             return changes
@@ -159,10 +175,10 @@ class ConsistencyGate:
         return changes
 
     def expire(self, path_m: float) -> dict[int, LoopStatus]:
-        """Reject the pending loops whose query lies more than `window_m` behind `path_m`."""
+        """Reject the pending loops whose query lies more than `WINDOW_M` behind `path_m`."""
         changes: dict[int, LoopStatus] = {}
         for n in list(self._pending):
-            if path_m - self._loops[n].query_path_m > self.cfg.window_m:
+            if path_m - self._loops[n].query_path_m > WINDOW_M:
                 self._set(n, "rejected", self._unsupported(n), changes)
         return changes
 
@@ -176,7 +192,7 @@ class ConsistencyGate:
     def _unsupported(self, n: int) -> str:
         return (
             f"unsupported: {len(self._support[n])} of {self.cfg.min_support} consistent loops "
-            f"within {self.cfg.window_m:.0f} m"
+            f"within {WINDOW_M:.0f} m"
         )
 
     def _set(self, n: int, status: LoopStatus, reason: str, changes: dict[int, LoopStatus]) -> None:

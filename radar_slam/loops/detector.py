@@ -29,8 +29,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import Scan, Velocity
-from radar_slam.loops.config import LoopClosureConfig
+from odometry import OdometryConfig, Scan, Velocity
+from radar_slam.loops.config import LOOP_RAPLACE, LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
 from radar_slam.loops.recent import HeldBackDatabase, held_back_retrieval, within_reach
 from radar_slam.loops.records import (
@@ -57,6 +57,13 @@ log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 POSE_DIM = 3
+LOOPS_PER_QUERY = 1
+"""Verification of a query's candidates stops once this many passed (the rest would close loops
+to the same place)."""
+PREDICTED_CHECKS = True
+"""A candidate on a closed stretch is checked by the phase-correlation refinement alone, from the
+loop the stretch's latest one predicts (`radar_slam.loops.tracking`; verified in full when that
+fails): about half a verification's cost per candidate on a revisit."""
 DescriptorListener = Callable[[int, NDArray[np.float32]], None]
 """Takes a scan's key and its RaPlace descriptor (`LoopDetector`'s `on_describe`)."""
 
@@ -148,7 +155,9 @@ class LoopDetector:
             that no scan is read twice); without it the detector keeps every database scan in
             memory (about 1.3 MB per MulRan scan).
         recognizer: the place database (default: RaPlace `PlaceRecognizer`).
-        verifier: the geometric verifier (default: `GeometricVerifier`).
+        verifier: the geometric verifier (default: `GeometricVerifier` with `odometry`).
+        odometry: the odometry settings of the poses given (their vehicle limits) and of the
+            verifier's phase-correlation refinement (None: the defaults).
         on_describe: called with (key, descriptor) each time a scan is described (in the
             thread that calls `add` or `finish`), so that another stage need not describe it
             again; the descriptor must not be changed.
@@ -167,14 +176,16 @@ class LoopDetector:
         recognizer: Recognizer | None = None,
         verifier: Verifier | None = None,
         on_describe: DescriptorListener | None = None,
+        odometry: OdometryConfig | None = None,
     ) -> None:
         self.config = LoopClosureConfig() if config is None else config
         cfg = self.config
+        self.odometry = OdometryConfig() if odometry is None else odometry
         self.scan_loader = scan_loader
         self.on_describe = on_describe
-        self.describe = DescriptorExtractor(cfg.raplace.descriptor)
+        self.describe = DescriptorExtractor(LOOP_RAPLACE.descriptor)
         self.recognizer: Recognizer = (
-            PlaceRecognizer(held_back_retrieval(cfg.raplace.retrieval, cfg.recent_path_m))
+            PlaceRecognizer(held_back_retrieval(LOOP_RAPLACE.retrieval, cfg.recent_path_m))
             if recognizer is None
             else recognizer
         )
@@ -182,9 +193,11 @@ class LoopDetector:
         # a recognizer given is used with its own exclusion window, as it comes)
         self._held_back: HeldBackDatabase | None = None
         if recognizer is None and cfg.recent_path_m > 0:
-            exclusion = cfg.raplace.retrieval.exclusion
+            exclusion = LOOP_RAPLACE.retrieval.exclusion
             self._held_back = HeldBackDatabase(self.recognizer, cfg.recent_path_m, exclusion)
-        self.verifier: Verifier = GeometricVerifier(cfg) if verifier is None else verifier
+        self.verifier: Verifier = (
+            GeometricVerifier(cfg, self.odometry) if verifier is None else verifier
+        )
         self.gate = ConsistencyGate(cfg.consistency)
         self.throttle = StretchThrottle(cfg.throttle)
         self._entries: dict[int, _Entry] = {}
@@ -303,9 +316,7 @@ class LoopDetector:
         if pose is not None and track.last_pose is not None and track.last_time_ns is not None:
             motion = between(track.last_pose, pose)
             track.path_m += float(np.hypot(motion[0], motion[1]))
-            step = step_twist(
-                motion, track.last_time_ns, int(scan.timestamp_ns), self.config.refinement
-            )
+            step = step_twist(motion, track.last_time_ns, int(scan.timestamp_ns), self.odometry)
             velocity = step.velocity
             if not step.plausible:
                 track.segment += 1  # the odometry is not trusted across this step
@@ -463,7 +474,7 @@ class LoopDetector:
                         )
                     )
                 )
-            if passed >= cfg.loops_per_query:
+            if passed >= LOOPS_PER_QUERY:
                 break
         return changes
 
@@ -483,7 +494,7 @@ class LoopDetector:
         """T_query_match predicted by the latest loop of the closed stretch the match lies on,
         or None (no such stretch, the odometry not trusted in between, or out of reach)."""
         cfg = self.config
-        if not cfg.throttle.predicted_checks or entry.pose is None or match.pose is None:
+        if not PREDICTED_CHECKS or entry.pose is None or match.pose is None:
             return None
         decision = self.throttle.anchor(entry.path_m, match.path_m)
         if decision is None or not self._decisions[decision].accepted:
@@ -544,8 +555,10 @@ def make_loop_detector(
     config: LoopClosureConfig,
     scan_loader: Callable[[int], Scan] | None = None,
     on_describe: DescriptorListener | None = None,
+    odometry: OdometryConfig | None = None,
 ) -> LoopDetector | NullLoopDetector:
-    """The configured detector: `LoopDetector`, or `NullLoopDetector` when disabled."""
+    """The configured detector: `LoopDetector` (with the run's `odometry` settings), or
+    `NullLoopDetector` when disabled."""
     if not config.enabled:
         return NullLoopDetector(config)
-    return LoopDetector(config, scan_loader, on_describe=on_describe)
+    return LoopDetector(config, scan_loader, on_describe=on_describe, odometry=odometry)

@@ -138,7 +138,7 @@ class KeyScan:
             with it (`LoopCovarianceConfig.deskew_error_fraction`).
         twist_span_s: time between the two odometry steps' middles the twist was interpolated
             between [s] (about the scan interval), or None; at low frame rates the sweep's yaw
-            rate can be far from that interpolation (`VerificationConfig.yaw_rate_search`).
+            rate can be far from that interpolation (`verification.YAW_RATE_SEARCH`).
         sweep_s: how long the scan's sweep lasted [s] when `scan` has no azimuth times but
             stands for one that had (a scan's record: its image already de-skewed), or None;
             the loop covariance's de-skew terms grow with it.

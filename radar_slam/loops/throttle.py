@@ -4,11 +4,11 @@ In a revisit every database scan proposes a candidate, and each verification cos
 as an odometry step; after a few consecutive accepted loops along one stretch of road, more loops
 on it add little to the graph. `StretchThrottle` tracks the latest run of accepted loops whose
 matches advance with their queries (same or opposite direction of travel). Once it holds
-`closed_after` loops the stretch is closed: a candidate lying where the stretch predicts the
+`CLOSED_AFTER` loops the stretch is closed: a candidate lying where the stretch predicts the
 match (on the stretch) is verified at most once per `closed_spacing_m` of travel, and a query
 whose candidate on the stretch is not due is skipped whole (its place is known). Anything else
 returns to full rate: a candidate off the stretch is verified as usual, and a failed
-verification on the stretch, a rejected loop, or `max_gap_m` of travel without an accepted loop
+verification on the stretch, a rejected loop, or `MAX_GAP_M` of travel without an accepted loop
 on it ends the stretch.
 
 `anchor` names the latest loop of the closed stretch a candidate lies on, from which the loop
@@ -27,6 +27,21 @@ import numpy as np
 
 from radar_slam.loops.config import ThrottleConfig
 from radar_slam.loops.records import LoopStatus
+
+CLOSED_AFTER = 3
+"""Consecutive accepted loops along one stretch (matches advancing with the queries, the same or
+the opposite way) that mark it closed."""
+STRETCH_TOLERANCE_M = 12.0
+"""A match is on a stretch when it lies within this path distance [m] of where the stretch
+predicts it ..."""
+STRETCH_DRIFT_FRACTION = 0.05
+"""... plus this fraction of the travel since the stretch's latest loop (the two drives' odometry
+path lengths differ by the drift)."""
+MAX_GAP_M = 100.0
+"""A stretch without an accepted loop over this much travel [m] is forgotten."""
+MAX_STRETCHES = 8
+"""Stretches tracked at once (a place driven several times aligns with each earlier drive); the
+oldest is dropped beyond."""
 
 
 @dataclass(frozen=True)
@@ -57,12 +72,12 @@ class Stretch:
     loops: int
     decision: int = -1
 
-    def offset_m(self, query_path_m: float, match_path_m: float, cfg: ThrottleConfig) -> float:
+    def offset_m(self, query_path_m: float, match_path_m: float) -> float:
         """How far [m] a match at `match_path_m` lies from where the stretch predicts the match
         of a query at `query_path_m`, beyond the tolerance (<= 0: on the stretch)."""
         travelled = abs(query_path_m - self.query_path_m)
         predicted = self.match_path_m + self.direction * (query_path_m - self.query_path_m)
-        tolerance = cfg.stretch_tolerance_m + cfg.stretch_drift_fraction * travelled
+        tolerance = STRETCH_TOLERANCE_M + STRETCH_DRIFT_FRACTION * travelled
         return abs(match_path_m - predicted) - tolerance
 
 
@@ -77,7 +92,7 @@ class StretchThrottle:
     The detector calls, per query: `due(query_path_m, match_paths_m)` before verifying; then
     `verified(...)` after each verification it ran and `resolved(changes)` with the statuses the
     consistency gate set. Several stretches are tracked at once (a place driven three times
-    aligns the third drive with both earlier ones), at most `ThrottleConfig.max_stretches`.
+    aligns the third drive with both earlier ones), at most `MAX_STRETCHES`.
     """
 
     def __init__(self, cfg: ThrottleConfig) -> None:
@@ -90,20 +105,19 @@ class StretchThrottle:
 
     def closed(self, stretch: Stretch) -> bool:
         """True when `stretch` has enough loops for throttling."""
-        return self.cfg.closed_spacing_m > 0 and stretch.loops >= self.cfg.closed_after
+        return self.cfg.closed_spacing_m > 0 and stretch.loops >= CLOSED_AFTER
 
     def on_closed_stretch(self, query_path_m: float, match_path_m: float) -> bool:
         """True when a match at `match_path_m` lies where a closed stretch predicts it."""
         return any(
-            self.closed(s) and s.offset_m(query_path_m, match_path_m, self.cfg) <= 0.0
-            for s in self.stretches
+            self.closed(s) and s.offset_m(query_path_m, match_path_m) <= 0.0 for s in self.stretches
         )
 
     def anchor(self, query_path_m: float, match_path_m: float) -> int | None:
         """The decision index of the latest loop of the closed stretch a match at
         `match_path_m` lies on (the nearest to its prediction), or None when it is on none."""
         on = [
-            (s.offset_m(query_path_m, match_path_m, self.cfg), s.decision)
+            (s.offset_m(query_path_m, match_path_m), s.decision)
             for s in self.stretches
             if self.closed(s) and s.decision >= 0
         ]
@@ -113,9 +127,7 @@ class StretchThrottle:
     def due(self, query_path_m: float, match_paths_m: list[float]) -> bool:
         """Whether a query at `query_path_m` with candidates matching at `match_paths_m` is
         verified (False: skipped, counted in `skipped`)."""
-        self.stretches = [
-            s for s in self.stretches if query_path_m - s.query_path_m <= self.cfg.max_gap_m
-        ]
+        self.stretches = [s for s in self.stretches if query_path_m - s.query_path_m <= MAX_GAP_M]
         if not any(self.on_closed_stretch(query_path_m, m) for m in match_paths_m):
             return True
         if query_path_m - self._last_verified_m >= self.cfg.closed_spacing_m:
@@ -154,7 +166,7 @@ class StretchThrottle:
         for n, s in enumerate(self.stretches):
             if loop.direction != s.direction:
                 continue
-            if s.offset_m(loop.query_path_m, loop.match_path_m, self.cfg) > 0.0:
+            if s.offset_m(loop.query_path_m, loop.match_path_m) > 0.0:
                 continue
             if loop.query_path_m > s.query_path_m:  # not an older loop accepted late
                 self.stretches[n] = Stretch(
@@ -162,10 +174,8 @@ class StretchThrottle:
                 )
             return
         new = Stretch(loop.query_path_m, loop.match_path_m, loop.direction, 1, loop.decision)
-        self.stretches = [*self.stretches, new][-self.cfg.max_stretches :]
+        self.stretches = [*self.stretches, new][-MAX_STRETCHES:]
 
     def _end(self, query_path_m: float, match_path_m: float) -> None:
         """Drop the stretches a match at `match_path_m` lies on."""
-        self.stretches = [
-            s for s in self.stretches if s.offset_m(query_path_m, match_path_m, self.cfg) > 0.0
-        ]
+        self.stretches = [s for s in self.stretches if s.offset_m(query_path_m, match_path_m) > 0.0]

@@ -5,9 +5,12 @@ a. the relative pose from the two sinogram spectra (`raplace.pose`), moved from 
    correlation, the inlier fraction or the translation is implausible;
 b. refinement by phase correlation (`odometry.registration`) of the query and the match turned by
    the sinogram rotation; rejected when its peak is weak or when it disagrees with the sinogram
-   estimate by more than `max_disagreement_m` / `_deg`;
+   estimate by more than `MAX_DISAGREEMENT_M` / `_DEG`;
 c. the covariance from the phase-correlation peak, inflated by the disagreement, floored
-   (`loop_covariance`); rejected when its rotation is too uncertain (`max_sigma_yaw_deg`).
+   (`loop_covariance`); rejected when its rotation is too uncertain (`MAX_SIGMA_YAW_DEG`).
+
+The refinement registers with the run's odometry settings (`odometry.OdometryConfig`: the same
+conditioning, cells and de-skew as the odometry).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from odometry import (
     MotionEstimate,
+    OdometryConfig,
     PolarScan,
     PreparedScan,
     PreprocessConfig,
@@ -29,7 +33,7 @@ from odometry import (
     register,
     searched_registration,
 )
-from radar_slam.loops.config import LoopClosureConfig, LoopCovarianceConfig
+from radar_slam.loops.config import LOOP_RAPLACE, LoopClosureConfig, LoopCovarianceConfig
 from radar_slam.loops.records import KeyScan, Verification
 from raplace import (
     NS_PER_S,
@@ -45,6 +49,31 @@ from raplace import (
 FloatArray = NDArray[np.float64]
 OFFERS_KEPT = 2
 """Offered conditioned scans kept: the detector queries scan k when scan k + 1 is offered."""
+MIN_SINOGRAM_QUALITY = 0.25
+"""Minimum normalised correlation of the two images aligned by the sinogram estimate
+(`RelativePose.quality`, about 1 for the same place, 0 unrelated)."""
+MIN_INLIER_FRACTION = 0.2
+"""Minimum fraction of sinogram angles whose shift fits the translation. It falls with the
+distance between the scans, faster on real streets than in the simulator (real Oxford scans
+12.5 m apart: 0.56 with the radial streaks removed, `raplace.config.PreprocessConfig.spoke_removal`,
+0.31 without); this leaves margin for revisits whose scene changed, and the phase-correlation
+checks decide."""
+MAX_DISAGREEMENT_M = 1.5
+"""The sinogram and phase-correlation translations may differ by this much [m]."""
+MAX_DISAGREEMENT_DEG = 3.0
+"""... and their rotations by this much [deg]."""
+MAX_SIGMA_YAW_DEG = 1.0
+"""The loop's rotation standard deviation (`loop_covariance`) may be at most this [deg]. It is
+large when a scan was swept across a yaw-rate change (a curvature step at a junction, the end of
+a turn), which no constant de-skew twist represents: such loops' rotations are off by degrees.
+1 deg puts the 2 deg error bound of a true loop (`radar_slam.evaluation.truth`) at two sigmas."""
+YAW_RATE_SEARCH = True
+"""At low frame rates (a query twist interpolated between odometry steps far apart), the query's
+de-skew yaw rate is searched by peak quality against the match (`odometry.searched_registration`):
+in a turn at 1 Hz the interpolated yaw rate can be tens of deg/s off the sweep's."""
+LOOP_COVARIANCE = LoopCovarianceConfig()
+"""The covariance model of verified loops (see `LoopCovarianceConfig` for its terms and
+docs/decisions.md for their calibration against the simulator's ground truth)."""
 
 
 def loop_covariance(
@@ -190,15 +219,21 @@ class GeometricVerifier:
     time it is a candidate (from its record in a run; keeping them saved nothing measurable on
     `synthetic/long`).
 
+    Args:
+        cfg: loop-closing settings (its `verification` section).
+        odometry: the run's odometry settings, which the phase-correlation refinement uses
+            (None: the defaults).
+
     A caller that has already conditioned a scan for registration (the pipeline's odometry)
     hands it over with `offer` before the detector sees the scan; the query is then not
     conditioned again (see `offer`). The last `OFFERS_KEPT` offered scans are kept (the detector
     queries a scan once the next one is in).
     """
 
-    def __init__(self, cfg: LoopClosureConfig) -> None:
+    def __init__(self, cfg: LoopClosureConfig, odometry: OdometryConfig | None = None) -> None:
         self.cfg = cfg
-        self.pose_estimator = PoseEstimator(cfg.raplace.pose)
+        self.odometry = OdometryConfig() if odometry is None else odometry
+        self.pose_estimator = PoseEstimator(LOOP_RAPLACE.pose)
         self._query_key: int | None = None
         self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
@@ -211,7 +246,7 @@ class GeometricVerifier:
         """Hand over scan `key`'s conditioned form (`odometry.Odometry.prepared`), to be used if
         that scan is verified as a query (the last `OFFERS_KEPT` offers are kept).
 
-        Made with the refinement's conditioning settings (`cfg.refinement.preprocess`), its
+        Made with the verifier's conditioning settings (`odometry.preprocess`), its
         conditioned polar scan is reused, de-skewed with the query's own velocity
         (`KeyScan.twist`), so the verification is exactly that of conditioning the scan again;
         otherwise it is ignored. (The odometry's images and spectra are not reused: they are
@@ -239,7 +274,7 @@ class GeometricVerifier:
         if self._query_prepared is None:
             self._query_prepared = self._from_offer(query)
         if self._query_prepared is None:
-            self._query_prepared = prepare(query.scan, self.cfg.refinement, query.twist)
+            self._query_prepared = prepare(query.scan, self.odometry, query.twist)
         return self._query_prepared
 
     def _from_offer(self, query: KeyScan) -> PreparedScan | None:
@@ -250,7 +285,7 @@ class GeometricVerifier:
         if offered is None:
             return None
         polar, conditioning = offered
-        refinement = self.cfg.refinement
+        refinement = self.odometry
         if polar.timestamp_ns != int(query.timestamp_ns):
             return None  # offered for another scan with the same key
         if conditioning != refinement.preprocess:
@@ -267,13 +302,11 @@ class GeometricVerifier:
         estimate: MotionEstimate,
     ) -> MotionEstimate:
         """`estimate`, or the registration with the query de-skewed at a searched yaw rate when
-        that correlates more strongly (`VerificationConfig.yaw_rate_search`; low frame rates
-        only; `odometry.searched_registration`)."""
-        if not self.cfg.verification.yaw_rate_search:
+        that correlates more strongly (`YAW_RATE_SEARCH`; low frame rates only;
+        `odometry.searched_registration`)."""
+        if not YAW_RATE_SEARCH:
             return estimate
-        return searched_registration(
-            prepared, aligned, estimate, self.cfg.refinement, query.twist_span_s
-        )
+        return searched_registration(prepared, aligned, estimate, self.odometry, query.twist_span_s)
 
     def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
         """Verify T_query_match; never raises for a bad match (the reason says why)."""
@@ -291,15 +324,15 @@ class GeometricVerifier:
                 False, reason, measurement, nan33, sinogram, float(rel.quality), quality
             )
 
-        if not np.isfinite(rel.quality) or rel.quality < vcfg.min_sinogram_quality:
+        if not np.isfinite(rel.quality) or rel.quality < MIN_SINOGRAM_QUALITY:
             return failed(
                 f"weak sinogram alignment (correlation {rel.quality:.2f} < "
-                f"{vcfg.min_sinogram_quality:.2f})"
+                f"{MIN_SINOGRAM_QUALITY:.2f})"
             )
-        if rel.inlier_fraction < vcfg.min_inlier_fraction:
+        if rel.inlier_fraction < MIN_INLIER_FRACTION:
             return failed(
                 f"sinogram shifts inconsistent (inliers {rel.inlier_fraction:.2f} < "
-                f"{vcfg.min_inlier_fraction:.2f})"
+                f"{MIN_INLIER_FRACTION:.2f})"
             )
         distance_m = float(np.hypot(sinogram[0], sinogram[1]))
         if distance_m > vcfg.max_translation_m:
@@ -328,14 +361,12 @@ class GeometricVerifier:
 
         # Phase correlation of the query and the match turned by the initial rotation.
         turn = float(initial[2])
-        aligned = prepare(
-            turned(match.scan, turn), self.cfg.refinement, turned_twist(match.twist, turn)
-        )
+        aligned = prepare(turned(match.scan, turn), self.odometry, turned_twist(match.twist, turn))
         # A prediction also seeds the registration (its translation; the match is turned by its
         # rotation): one rotation and half-turn hypothesis instead of a global search.
         hint = None if np.isfinite(initial_quality) else np.array([initial[0], initial[1], 0.0])
         prepared_query = self._prepared_query(query)
-        estimate = register(prepared_query, aligned, self.cfg.refinement, hint)
+        estimate = register(prepared_query, aligned, self.odometry, hint)
         estimate = self._searched_query(query, prepared_query, aligned, estimate)
         refined = compose(estimate.motion, np.array([0.0, 0.0, turn]))
         if not estimate.ok:
@@ -350,11 +381,11 @@ class GeometricVerifier:
         disagreement = between(refined, initial)
         off_m = float(np.hypot(disagreement[0], disagreement[1]))
         off_deg = float(np.rad2deg(abs(wrap_angle(disagreement[2]))))
-        if off_m > vcfg.max_disagreement_m or off_deg > vcfg.max_disagreement_deg:
+        if off_m > MAX_DISAGREEMENT_M or off_deg > MAX_DISAGREEMENT_DEG:
             source = "sinogram" if np.isfinite(initial_quality) else "prediction"
             return failed(
                 f"{source} and phase correlation disagree by {off_m:.2f} m / {off_deg:.2f} deg "
-                f"(max {vcfg.max_disagreement_m:.2f} m / {vcfg.max_disagreement_deg:.2f} deg)",
+                f"(max {MAX_DISAGREEMENT_M:.2f} m / {MAX_DISAGREEMENT_DEG:.2f} deg)",
                 refined,
                 estimate.quality,
             )
@@ -362,15 +393,15 @@ class GeometricVerifier:
             estimate.covariance,
             disagreement,
             float(refined[2]),
-            self.cfg.covariance,
+            LOOP_COVARIANCE,
             deskew_variance(query, match),
             swept_turn_variance(query, match),
         )
         sigma_yaw_deg = float(np.rad2deg(np.sqrt(covariance[2, 2])))
-        if sigma_yaw_deg > vcfg.max_sigma_yaw_deg:
+        if sigma_yaw_deg > MAX_SIGMA_YAW_DEG:
             return failed(
                 f"rotation too uncertain (sigma {sigma_yaw_deg:.2f} deg > "
-                f"{vcfg.max_sigma_yaw_deg:.2f} deg: a scan swept across a yaw-rate change)",
+                f"{MAX_SIGMA_YAW_DEG:.2f} deg: a scan swept across a yaw-rate change)",
                 refined,
                 estimate.quality,
             )

@@ -27,10 +27,11 @@ from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import RadarSlamError, TrajectoryError
 from radar_slam.evaluation.metrics import associate, umeyama_alignment_se2
 from radar_slam.loops import LoopDecision
+from radar_slam.loops.config import LOOP_RAPLACE
 from radar_slam.loops.sweep_twist import scan_sweep_twist, step_velocities
 from radar_slam.maps.config import MapsConfig
 from radar_slam.maps.format import EDGE_DTYPE, EDGE_KINDS, KEYFRAME_DTYPE, Map, Session
-from radar_slam.maps.images import ImageGeometry, KeyframeImager
+from radar_slam.maps.images import KEYFRAME_IMAGE, ImageGeometry, KeyframeImager
 from radar_slam.maps.keyframes import (
     DESCRIPTOR_DTYPE,
     KeyframeRecord,
@@ -123,7 +124,7 @@ def map_settings(cfg: MapsConfig, descriptor: DescriptorConfig) -> dict[str, Any
     """The settings recorded in map.json (plain JSON)."""
     return {
         "keyframe_spacing_m": cfg.keyframe_spacing_m,
-        "image": asdict(cfg.image),
+        "image": asdict(KEYFRAME_IMAGE),
         "descriptor": asdict(descriptor),
     }
 
@@ -225,10 +226,10 @@ def build_map(
         RadarSlamError: no recorded keyframes and no sequence.
     """
     cfg = results.config.maps
-    descriptor_cfg = results.config.loop_closure.raplace.descriptor
+    descriptor_cfg = LOOP_RAPLACE.descriptor
     slam = results.slam if poses is None else Trajectory(results.slam.timestamps_ns, poses)
     scans, descriptors, images, scales = keyframe_content(
-        results, sequence, cfg.image, descriptor_cfg
+        results, sequence, KEYFRAME_IMAGE, descriptor_cfg
     )
     stamps = slam.timestamps_ns
     keyframes = keyframe_rows(0, scans, stamps, slam.poses, results.ground_truth_poses, scales)

@@ -75,6 +75,11 @@ class ImageGeometry:
         return int(self.max_range_m / self.range_resolution_m)
 
 
+KEYFRAME_IMAGE = ImageGeometry()
+"""The image geometry of the maps a run makes (a map records its own, which its users read):
+the defaults of `ImageGeometry`, the verifier's reach at a few bytes per pixel."""
+
+
 class KeyframeImager:
     """Scan -> (PNG bytes, scale) and back to a polar `RadarFrame`; caches the sampling grids."""
 

@@ -38,7 +38,7 @@ from odometry import (
 from radar_slam.errors import RadarSlamError
 from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_velocity, sweep_twist
 from radar_slam.maps.config import MapsConfig
-from radar_slam.maps.images import ImageGeometry, KeyframeImager
+from radar_slam.maps.images import KEYFRAME_IMAGE, ImageGeometry, KeyframeImager
 from raplace import DescriptorConfig, DescriptorExtractor
 
 log = logging.getLogger(__name__)
@@ -174,7 +174,7 @@ class KeyframeRecorder:
     and the `add` of the next, and `finish` once after the last; all from one thread (`scan` too).
 
     Args:
-        maps: the keyframe spacing and image geometry.
+        maps: the keyframe spacing (the image geometry is `KEYFRAME_IMAGE`).
         odometry: the odometry settings (conditioning, the vehicle's limits).
         descriptor: the RaPlace descriptor settings.
         keep_map: record the map keyframes (else only the scans offered a descriptor).
@@ -191,7 +191,7 @@ class KeyframeRecorder:
         self.odometry = odometry
         self.descriptor_config = descriptor
         self.keep_map = keep_map
-        self.imager = KeyframeImager(maps.image, odometry)
+        self.imager = KeyframeImager(KEYFRAME_IMAGE, odometry)
         self.describe = DescriptorExtractor(descriptor)
         self.spacing = KeyframeSpacing(maps.keyframe_spacing_m)
         self._keyframes: list[int] = []
@@ -251,7 +251,7 @@ class KeyframeRecorder:
         return RecordedKeyframes(
             tuple(self.records[scan][0] for scan in self._keyframes),
             self.maps.keyframe_spacing_m,
-            self.maps.image,
+            KEYFRAME_IMAGE,
             self.descriptor_config,
             self.odometry,
         )

@@ -2,13 +2,13 @@
 
 `Localizer(map, config).localize(frame)` places each scan in the map frame:
 
-- **lost -> relocalised.** Every `relocalise_every_m` of travel the scan's RaPlace descriptor is
+- **lost -> relocalised.** Every `RELOCALISE_EVERY_M` of travel the scan's RaPlace descriptor is
   looked up in the whole map (no exclusion window) and the best candidates are verified as loops
   are (`radar_slam.loops.GeometricVerifier`, both pi hypotheses of the rotation, against the
   keyframe's stored image made back into a scan); each that verifies gives a pose hypothesis
   T_map_scan = T_map_keyframe * z^-1, best registration quality first. Hypotheses are only
   believed once they make a chain (attempted at every scan once one is held), each agreeing with
-  the previous one carried forward by the odometry (`confirm_max_error_m/_deg`), from
+  the previous one carried forward by the odometry (`CONFIRM_MAX_ERROR_M/_DEG`), from
   `CONFIRM_KEYFRAMES` distinct keyframes over `CONFIRM_SCANS` scans or more: the keyframes' own
   map poses must then agree with each other and with the path driven, which a wrong match, or a
   run of them on a repetitive street, rarely does. The last keyframe may come from a tracking
@@ -17,9 +17,9 @@
 - **tracked.** Our odometry predicts the pose; every `fix_every_m` the scan is registered by
   phase correlation (`odometry.registration`, the loop verifier's refinement stage, with the
   predicted relative yaw in place of its sinogram stage) against the nearest map keyframes to
-  the prediction (within `search_radius_m`). A fix with a strong peak that agrees with
-  the prediction (`max_innovation_m/_deg`) enters a small pose graph (`radar_slam.graph`): the
-  scans of the latest `window_fixes` fixes joined by the odometry between them, each fix a loop
+  the prediction (within `SEARCH_RADIUS_M`). A fix with a strong peak that agrees with
+  the prediction (`MAX_INNOVATION_M/_DEG`) enters a small pose graph (`radar_slam.graph`): the
+  scans of the latest `WINDOW_FIXES` fixes joined by the odometry between them, each fix a loop
   factor (robust kernel) to its keyframe, the keyframes held by tight priors at their map poses.
   The fused pose of the newest scan is the new anchor of the prediction.
 - **lost.** Once `FAILED_FIXES_LOST` tracking fixes in a row have failed, the registration to
@@ -63,7 +63,8 @@ from radar_slam.loops import (
     Verification,
     loop_covariance,
 )
-from radar_slam.loops.verification import turned
+from radar_slam.loops.config import LOOP_RAPLACE
+from radar_slam.loops.verification import LOOP_COVARIANCE, turned
 from radar_slam.maps.format import Map, MapError
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
 from raplace import (
@@ -100,6 +101,31 @@ other and with a short drive; a third rarely does (`Localizer._complete_chain`).
 CONFIRM_SCANS = 2
 """Scans the chain must span: the odometry between them checks the keyframes' relative poses
 against the path driven, which one scan's matches alone cannot."""
+RELOCALISE_EVERY_M = 4.0
+"""While lost with no hypothesis held, a global attempt after this much travel [m]; once one is
+held, every scan is an attempt."""
+CONFIRM_MAX_ERROR_M = 1.5
+"""A global fix is only believed once further hypotheses agree, each with the previous one carried
+forward by the odometry, within this distance [m] ..."""
+CONFIRM_MAX_ERROR_DEG = 3.0
+"""... and this rotation [deg]."""
+SEARCH_RADIUS_M = 12.0
+"""Tracking fixes use the map keyframes within this distance of the predicted pose [m], nearest
+first."""
+FIX_KEYFRAMES = 2
+"""At most this many keyframes are tried per tracking fix (and per attempt to complete a
+relocalisation's agreeing hypotheses with one)."""
+MAX_INNOVATION_M = 2.0
+"""A tracking fix farther than this from the prediction is refused [m] ..."""
+MAX_INNOVATION_DEG = 4.0
+"""... or turned more than this from it [deg]."""
+WINDOW_FIXES = 6
+"""The sliding window keeps the scans of this many latest fixes."""
+MAP_SIGMA_XY_M = 0.05
+"""Standard deviation of the map keyframe poses in the window graph and in a joined session's
+graph [m] ..."""
+MAP_SIGMA_YAW_DEG = 0.1
+"""... and of their rotation [deg]."""
 FAILED_FIXES_LOST = 2
 """Tracking fix attempts failing in a row after which the scans are reported lost: one can fail
 on a passing truck; two in a row mean the map no longer supports the pose, which is then only
@@ -190,8 +216,10 @@ def symmetric(matrix: FloatArray) -> FloatArray:
     return 0.5 * (matrix + matrix.T)
 
 
-def descriptor_config_of(m: Map, fallback: DescriptorConfig) -> DescriptorConfig:
-    """The descriptor settings the map was made with (queries must use the same)."""
+def descriptor_config_of(m: Map) -> DescriptorConfig:
+    """The descriptor settings the map was made with (queries must use the same; a map that
+    records none was made with the loop closer's, `LOOP_RAPLACE`)."""
+    fallback = LOOP_RAPLACE.descriptor
     stored = m.settings.get("descriptor")
     if not stored:
         return fallback
@@ -199,28 +227,6 @@ def descriptor_config_of(m: Map, fallback: DescriptorConfig) -> DescriptorConfig
         return merge(DescriptorConfig, fallback, stored, "map.json: settings.descriptor")
     except ConfigError as exc:
         raise MapError(str(exc)) from None
-
-
-def settings_for_map(config: PipelineConfig, m: Map) -> PipelineConfig:
-    """`config` with the descriptor settings the map was made with, which every query of it
-    uses: the settings that actually run (to record), with a warning when the config asked for
-    others."""
-    asked = config.loop_closure.raplace.descriptor
-    used = descriptor_config_of(m, asked)
-    if used == asked:
-        return config
-    changed = [
-        f"{f.name} {getattr(asked, f.name)} -> {getattr(used, f.name)}"
-        for f in dataclasses.fields(used)
-        if getattr(asked, f.name) != getattr(used, f.name)
-    ]
-    log.warning(
-        "loop_closure.raplace.descriptor: the map's settings replace the config's (%s)",
-        ", ".join(changed),
-    )
-    raplace = dataclasses.replace(config.loop_closure.raplace, descriptor=used)
-    loop_closure = dataclasses.replace(config.loop_closure, raplace=raplace)
-    return dataclasses.replace(config, loop_closure=loop_closure)
 
 
 def image_geometry_of(m: Map) -> ImageGeometry:
@@ -241,9 +247,7 @@ class MapKeyframes:
         self.map = m
         self.poses = m.poses
         self.imager = KeyframeImager(image_geometry_of(m), config.odometry)
-        retrieval = dataclasses.replace(
-            config.loop_closure.raplace.retrieval, exclusion=ExclusionConfig(0, 0.0)
-        )
+        retrieval = dataclasses.replace(LOOP_RAPLACE.retrieval, exclusion=ExclusionConfig(0, 0.0))
         self.recognizer = PlaceRecognizer(retrieval)
         self.recognizer.add_batch(
             np.asarray(m.descriptors, dtype=np.float32), np.arange(len(m), dtype=np.int64)
@@ -283,11 +287,9 @@ class Localizer:
         self.config = config
         self.cfg = config.maps.localization
         self.keyframes = MapKeyframes(m, config)
-        self.describe = DescriptorExtractor(
-            descriptor_config_of(m, config.loop_closure.raplace.descriptor)
-        )
+        self.describe = DescriptorExtractor(descriptor_config_of(m))
         self.odometry = Odometry(config.odometry)
-        self.verifier = GeometricVerifier(config.loop_closure)
+        self.verifier = GeometricVerifier(config.loop_closure, config.odometry)
         self.state = _State()
         self._prepared: PreparedScan | None = None
         self._prepared_key: int | None = None
@@ -346,7 +348,7 @@ class Localizer:
         cfg, state = self.cfg, self.state
         if state.chain and state.pending_path_m > cfg.lost_after_m:
             state.chain = []
-        if not state.chain and state.path_since_attempt_m < cfg.relocalise_every_m:
+        if not state.chain and state.path_since_attempt_m < RELOCALISE_EVERY_M:
             return False  # while a chain is open, every scan may add to it
         state.path_since_attempt_m = 0.0
         self.global_attempts += 1
@@ -377,15 +379,15 @@ class Localizer:
     def _complete_chain(self, query: KeyScan, keyframes: set[int]) -> None:
         """A chain one keyframe short of `CONFIRM_KEYFRAMES` may take its last one from a
         tracking fix: the scan registered, as while tracking, against the map keyframes nearest
-        the chain's pose that are not in it, `fix_keyframes` of them whatever their distance
+        the chain's pose that are not in it, `FIX_KEYFRAMES` of them whatever their distance
         (a vehicle entering the map's route sees the keyframes beyond the two it matched from
-        farther than `search_radius_m`; one too far to share its view fails the registration or
+        farther than `SEARCH_RADIUS_M`; one too far to share its view fails the registration or
         the innovation gate). A fix that does not agree with the chain is dropped: it comes from
         the chain's own prediction, so it never starts one."""
         state = self.state
         predicted = compose(state.chain[-1][0].pose, state.pending_since)
-        nearest = self.keyframes.near(predicted, np.inf, self.cfg.fix_keyframes + len(keyframes))
-        for kf in [k for k in nearest if k not in keyframes][: self.cfg.fix_keyframes]:
+        nearest = self.keyframes.near(predicted, np.inf, FIX_KEYFRAMES + len(keyframes))
+        for kf in [k for k in nearest if k not in keyframes][:FIX_KEYFRAMES]:
             fix = self._tracking_fix(query, kf, predicted)
             if fix is not None and self._joins_chain(fix):
                 return
@@ -400,12 +402,12 @@ class Localizer:
 
     def _joins_chain(self, fix: _Fix) -> bool:
         """Append `fix` to the chain if it agrees with the latest hypothesis carried forward by
-        the odometry (`confirm_max_error_m/_deg`)."""
-        cfg, state = self.cfg, self.state
+        the odometry (`CONFIRM_MAX_ERROR_M/_DEG`)."""
+        _cfg, state = self.cfg, self.state
         if not state.chain:
             return False
         carried = compose(state.chain[-1][0].pose, state.pending_since)
-        if not self._agrees(carried, fix.pose, cfg.confirm_max_error_m, cfg.confirm_max_error_deg):
+        if not self._agrees(carried, fix.pose, CONFIRM_MAX_ERROR_M, CONFIRM_MAX_ERROR_DEG):
             return False
         state.chain.append((fix, state.pending_since.copy(), state.pending_cov.copy()))
         self._restart_pending()
@@ -439,7 +441,7 @@ class Localizer:
         if state.path_since_attempt_m >= cfg.fix_every_m:
             state.path_since_attempt_m = 0.0
             predicted = compose(state.anchor, state.since)
-            near = self.keyframes.near(predicted, cfg.search_radius_m, cfg.fix_keyframes)
+            near = self.keyframes.near(predicted, SEARCH_RADIUS_M, FIX_KEYFRAMES)
             fix = next(
                 (f for kf in near if (f := self._tracking_fix(query, kf, predicted)) is not None),
                 None,
@@ -461,7 +463,7 @@ class Localizer:
         """Append the fix's scan to the window, re-solve it, re-anchor the prediction."""
         state = self.state
         state.window.append(_Node(fix.scan, motion.copy(), covariance.copy(), fix, fix.pose))
-        state.window = state.window[-self.cfg.window_fixes :]
+        state.window = state.window[-WINDOW_FIXES:]
         try:
             fused = self._solve_window()
         except GraphError as exc:  # keep the fix's own pose rather than stop
@@ -503,22 +505,22 @@ class Localizer:
         """Phase correlation of the scan and keyframe `kf` turned by the predicted relative yaw
         (the prediction replaces the sinogram stage of the loop verifier); accepted when the
         peak is strong and the fix agrees with the prediction."""
-        lcfg, cfg = self.config.loop_closure, self.cfg
+        lcfg, odometry = self.config.loop_closure, self.config.odometry
         expected = between(predicted, self.keyframes.poses[kf])  # T_scan_keyframe
         turn = float(expected[2])
         if self._prepared_key != query.key or self._prepared is None:
-            self._prepared = prepare(query.scan, lcfg.refinement, query.twist)
+            self._prepared = prepare(query.scan, odometry, query.twist)
             self._prepared_key = query.key
-        aligned = prepare(turned(self.keyframes.scan(kf).scan, turn), lcfg.refinement)
-        estimate = register(self._prepared, aligned, lcfg.refinement)
+        aligned = prepare(turned(self.keyframes.scan(kf).scan, turn), odometry)
+        estimate = register(self._prepared, aligned, odometry)
         if not estimate.ok or estimate.quality < lcfg.verification.min_refined_quality:
             return None
         measurement = compose(estimate.motion, np.array([0.0, 0.0, turn]))
         pose = compose(self.keyframes.poses[kf], inverse(measurement))
-        if not self._agrees(predicted, pose, cfg.max_innovation_m, cfg.max_innovation_deg):
+        if not self._agrees(predicted, pose, MAX_INNOVATION_M, MAX_INNOVATION_DEG):
             return None
         covariance = loop_covariance(
-            estimate.covariance, np.zeros(3), float(measurement[2]), lcfg.covariance
+            estimate.covariance, np.zeros(3), float(measurement[2]), LOOP_COVARIANCE
         )
         return _Fix(query.key, kf, measurement, covariance, float(estimate.quality), pose)
 
@@ -544,10 +546,7 @@ class Localizer:
 
     def _map_prior(self) -> FloatArray:
         """(3, 3) covariance of a map keyframe's pose (its prior in the window graph)."""
-        cfg = self.cfg
-        return np.diag(
-            [cfg.map_sigma_xy_m**2, cfg.map_sigma_xy_m**2, np.deg2rad(cfg.map_sigma_yaw_deg) ** 2]
-        )
+        return np.diag([MAP_SIGMA_XY_M**2, MAP_SIGMA_XY_M**2, np.deg2rad(MAP_SIGMA_YAW_DEG) ** 2])
 
     @staticmethod
     def _agrees(a: FloatArray, b: FloatArray, max_m: float, max_deg: float) -> bool:

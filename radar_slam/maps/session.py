@@ -55,6 +55,8 @@ from radar_slam.maps.build import (
 from radar_slam.maps.format import EDGE_DTYPE, Map, Session
 from radar_slam.maps.localizer import (
     MAP_KEY_BASE,
+    MAP_SIGMA_XY_M,
+    MAP_SIGMA_YAW_DEG,
     MapKeyframes,
     descriptor_config_of,
     image_geometry_of,
@@ -114,8 +116,8 @@ class InterSessionDetector:
     def __init__(self, m: Map, config: PipelineConfig) -> None:
         self.cfg = config.loop_closure
         self.keyframes = MapKeyframes(m, config)
-        self.describe = DescriptorExtractor(descriptor_config_of(m, self.cfg.raplace.descriptor))
-        self.verifier = GeometricVerifier(self.cfg)
+        self.describe = DescriptorExtractor(descriptor_config_of(m))
+        self.verifier = GeometricVerifier(self.cfg, config.odometry)
         self.gate = ConsistencyGate(self.cfg.consistency)
         self.map_path_m = map_paths(m)
         self.decisions: list[LoopDecision] = []
@@ -205,7 +207,6 @@ def joint_graph(
     """The session + map graph (see the module docstring) optimised; returns it and
     {decision index: loop id} of the inter-session loops."""
     config = results.config
-    lcfg = config.maps.localization
     graph = PoseGraph(config.graph)
     odometry = results.odometry_results
     for n, result in enumerate(odometry):
@@ -215,9 +216,7 @@ def joint_graph(
     for d in results.loops:
         if d.accepted:
             graph.add_loop(d.query_key, d.match_key, d.measurement, d.covariance)
-    prior = np.diag(
-        [lcfg.map_sigma_xy_m**2, lcfg.map_sigma_xy_m**2, np.deg2rad(lcfg.map_sigma_yaw_deg) ** 2]
-    )
+    prior = np.diag([MAP_SIGMA_XY_M**2, MAP_SIGMA_XY_M**2, np.deg2rad(MAP_SIGMA_YAW_DEG) ** 2])
     ids = {}
     for n, d in enumerate(loops):
         if not d.accepted:
@@ -237,12 +236,11 @@ def extended_map(
 ) -> Map:
     """`m` with the session appended (keyframes every `keyframe_spacing_m` of the odometry path,
     as in the run's own map, at `poses`: the session's poses in the map frame)."""
-    config = results.config
     scans, descriptors, images, scales = keyframe_content(
         results,
         sequence,
         image_geometry_of(m),
-        descriptor_config_of(m, config.loop_closure.raplace.descriptor),
+        descriptor_config_of(m),
     )
     stamps = results.slam.timestamps_ns
     session_index = len(m.sessions)

@@ -23,7 +23,6 @@ from radar_slam.graph import LoopConstraint, PoseGraph
 from radar_slam.loops import (
     make_loop_detector,
 )
-from radar_slam.loops.config import ConsistencyConfig
 from radar_slam.loops.consistency import odometry_segment_covariance
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.pipeline.records import (
@@ -69,7 +68,7 @@ class InputLoop:
         return f"EDGE_SE2 {self.edge.i} {self.edge.j}"
 
 
-def input_loops(record: G2oGraph, cfg: ConsistencyConfig) -> list[InputLoop]:
+def input_loops(record: G2oGraph) -> list[InputLoop]:
     """The input graph's edges between non-consecutive vertices, each checked against the
     odometry path (the vertex poses) between its two vertices."""
     keys = record.keys()
@@ -84,7 +83,7 @@ def input_loops(record: G2oGraph, cfg: ConsistencyConfig) -> list[InputLoop]:
         predicted = between(poses[a], poses[b])
         error = np.asarray(between(predicted, edge.measurement), dtype=np.float64)
         error[2] = wrap_angle(error[2])
-        covariance = edge.covariance + odometry_segment_covariance(abs(path_m[b] - path_m[a]), cfg)
+        covariance = edge.covariance + odometry_segment_covariance(abs(path_m[b] - path_m[a]))
         chi2 = float(error @ np.linalg.solve(covariance, error))
         loops.append(InputLoop(edge, chi2, float(np.hypot(error[0], error[1]))))
     return loops
@@ -93,7 +92,7 @@ def input_loops(record: G2oGraph, cfg: ConsistencyConfig) -> list[InputLoop]:
 def graph_of_input(record: G2oGraph, config: PipelineConfig) -> tuple[PoseGraph, list[InputLoop]]:
     """The input as a `PoseGraph` without its grossly inconsistent loops (each named in a
     warning), and its loops."""
-    loops = input_loops(record, config.loop_closure.consistency)
+    loops = input_loops(record)
     gross = [loop for loop in loops if loop.gross]
     for loop in gross:
         logger.warning(
@@ -151,7 +150,9 @@ def close_loops_on_graph(
     poses = record.poses()
     scan_of_key = {key: n for n, key in enumerate(keys)}
     detector = make_loop_detector(
-        config.loop_closure, scan_loader=lambda key: sequence[scan_of_key[key]]
+        config.loop_closure,
+        scan_loader=lambda key: sequence[scan_of_key[key]],
+        odometry=config.odometry,
     )
     start = time.perf_counter()
     loops: list[LoopConstraint] = []

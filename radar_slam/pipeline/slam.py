@@ -21,9 +21,9 @@ time "loop detection" is the worker's (it overlaps the others) and "loop wait" t
 waiting for it; a loop detector given to the pipeline is then called from the worker thread only.
 
 ISAM2 is updated after loops are added (so that initial guesses are made against the corrected
-estimate), at most every `graph.loop_update_interval` scans, or every
-`graph.settled_update_interval` scans while every loop added since the last update agrees with
-the current estimate (`graph.settled_chi2`: a stretch already closed), and once at the end; a
+estimate), at most every `LOOP_UPDATE_INTERVAL` scans, or every `SETTLED_UPDATE_INTERVAL` scans
+while every loop added since the last update agrees with the current estimate (`SETTLED_CHI2`: a
+stretch already closed), and once at the end; a
 final batch pass (GNC by default)
 follows, and accepted loops whose final weight falls below `BACKEND_REJECT_WEIGHT` are recorded as
 rejected by the back end.
@@ -45,6 +45,7 @@ from radar_slam.loops import (
     LoopDetectorProtocol,
     make_loop_detector,
 )
+from radar_slam.loops.config import CHI2_3DOF_99, LOOP_RAPLACE
 from radar_slam.maps.keyframes import (
     KeyframeRecorder,
     KeyframeStage,
@@ -76,6 +77,17 @@ from radar_slam.pipeline.steps import (
     summarise,
 )
 from radar_slam.trajectory import Trajectory
+
+LOOP_UPDATE_INTERVAL = 10
+"""Scans between ISAM2 updates that carry loops (each loop update re-eliminates the path back to
+the loop's older end; the final pass refines the result)."""
+SETTLED_UPDATE_INTERVAL = 100
+"""... and while every loop added since the last update agrees with the current estimate (a
+stretch already closed: an update would barely move it; its loops enter the graph all the
+same)."""
+SETTLED_CHI2 = CHI2_3DOF_99
+"""A loop agrees with the current estimate when its squared Mahalanobis distance from it
+(`PoseGraph.residual_chi2`) is below this (chi-square 99 % for 3 degrees of freedom)."""
 
 
 class Pipeline:
@@ -120,6 +132,7 @@ class Pipeline:
                 self.config.loop_closure,
                 scan_loader=self.keyframes.scan,
                 on_describe=self.keyframes.offer_descriptor,
+                odometry=self.config.odometry,
             )
             if loop_detector is None
             else loop_detector
@@ -194,8 +207,9 @@ class Pipeline:
         loops = own_detector and cfg.loop_closure.enabled
         if not (record_map or loops):
             return NullKeyframeRecorder()
-        descriptor = cfg.loop_closure.raplace.descriptor
-        return KeyframeRecorder(cfg.maps, cfg.odometry, descriptor, keep_map=record_map)
+        return KeyframeRecorder(
+            cfg.maps, cfg.odometry, LOOP_RAPLACE.descriptor, keep_map=record_map
+        )
 
     # -- per-scan steps -----------------------------------------------------------------------
     def _read(self, reader: ScanReader) -> RadarFrame:
@@ -225,21 +239,20 @@ class Pipeline:
             self.graph.add_odometry(previous, result.index, measurement, covariance)
 
     def _close_loops(self, loops: list[LoopConstraint], index: int | None) -> None:
-        """Add `loops` to the graph; run ISAM2 once `graph.loop_update_interval` scans have
-        passed since its last update, or `graph.settled_update_interval` while every loop added
-        since agrees with the current estimate (`index` None: the end of the run, where
-        `_optimise` updates)."""
-        cfg = self.config.graph
+        """Add `loops` to the graph; run ISAM2 once `LOOP_UPDATE_INTERVAL` scans have passed
+        since its last update, or `SETTLED_UPDATE_INTERVAL` while every loop added since agrees
+        with the current estimate (`index` None: the end of the run, where `_optimise`
+        updates)."""
         with self.timer("graph"):
             for loop in loops:
                 loop_id = self.graph.add_loop(loop.i, loop.j, loop.measurement, loop.covariance)
                 self._loop_ids[(loop.i, loop.j)] = loop_id
                 if not self._loops_correct:
-                    self._loops_correct = self.graph.residual_chi2(loop_id) > cfg.settled_chi2
+                    self._loops_correct = self.graph.residual_chi2(loop_id) > SETTLED_CHI2
             self._loops_pending |= bool(loops)
-            interval = cfg.loop_update_interval
+            interval = LOOP_UPDATE_INTERVAL
             if not self._loops_correct:
-                interval = max(interval, cfg.settled_update_interval)
+                interval = max(interval, SETTLED_UPDATE_INTERVAL)
             if index is not None and self._loops_pending and index - self._last_update >= interval:
                 self.graph.update()
                 self._loops_pending = self._loops_correct = False

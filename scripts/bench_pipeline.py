@@ -9,7 +9,9 @@ and first-pose aligned), KITTI drift, and loops proposed / accepted / true.
 1 = sequential on one core (pinned; no reader or loop thread), 2 = concurrent on two cores
 (scans read ahead, loops closed on a worker thread; `PipelineConfig.concurrency`). Both add the
 loops at the same scans, so their accuracy figures must agree; the table at the end puts them
-side by side. BLAS and OpenCV run single-threaded in both.
+side by side. BLAS and OpenCV run single-threaded in both. The peak RSS is the process's
+(`resource.getrusage`) after each run, so it covers the runs before it too: for one run's
+memory, run one sequence with one `--workers`.
 
 `--inject-false F` adds the robustness experiment: on a fraction F of the database queries a
 random database scan is put first among the candidates; a fake verifier passes it when it lies
@@ -38,6 +40,7 @@ import dataclasses
 import json
 import logging
 import os
+import resource
 import sys
 import time
 from pathlib import Path
@@ -76,8 +79,11 @@ COMPARED = (
     ("loops_proposed", "loops proposed", "{}"),
     ("loops_accepted", "loops accepted", "{}"),
     ("loops_accepted_true", "loops true", "{}"),
+    ("peak_rss_mb", "peak RSS [MB]", "{:.0f}"),
 )
 """(metrics row key, label, format) of the side-by-side table."""
+KIB_PER_MB = 1024
+"""`ru_maxrss` is in KiB on Linux."""
 
 
 def with_workers(config: PipelineConfig, workers: int) -> PipelineConfig:
@@ -150,6 +156,7 @@ def report(name: str, results: Results, cpu_s: float) -> dict[str, object]:
     row["cpu_seconds"] = cpu_s
     row["frames_per_cpu_second"] = m.frames / cpu_s if cpu_s > 0 else 0.0
     row["timings_s"] = results.timings_s
+    row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / KIB_PER_MB
     logger.info(
         "%s: %d frames, %.1f frames/s wall, %.1f frames/s CPU; steps %s",
         name,

@@ -132,7 +132,7 @@ def test_the_reader_accepts_exactly_the_documented_keys() -> None:
         ({"loop_closure": {"refinement": {"deskew": False}}}, "uses the odometry: section"),
         ({"loop_closure": {"raplace": {"pose": {"n_theta": 90}}}}, "config.LOOP_RAPLACE"),
         ({"loop_closure": {"covariance": {"sigma_scale": 2}}}, "verification.LOOP_COVARIANCE"),
-        ({"loop_closure": {"scan_cache_mb": 64}}, "loops.detector.SCAN_CACHE_MB"),
+        ({"loop_closure": {"scan_cache_mb": 64}}, "verifies a database scan from its record"),
         (
             {"loop_closure": {"verification": {"max_disagreement_m": 2}}},
             "loops.verification.MAX_DISAGREEMENT_M",

@@ -13,7 +13,6 @@ from odometry.scan import Scan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.errors import DatasetFormatError
 from radar_slam.loops import LoopClosureError, LoopConstraint, LoopDetector
-from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.pipeline import Pipeline, PipelineConfig, Progress, Results, load_config
 from radar_slam.pipeline.concurrency import ScanReader
 
@@ -140,16 +139,3 @@ def test_reader_hands_out_scans_in_order_then_the_error(tiny_loop: RadarSequence
             reader.next()
     assert stamps == [int(t) for t in tiny_loop.timestamps_ns[:BAD_SCAN]]
     assert not our_threads()
-
-
-def test_cache_drops_the_least_recently_used_beyond_its_budget() -> None:
-    cache: ByteBudgetCache[np.ndarray] = ByteBudgetCache(3.0, lambda a: int(a.nbytes))
-    mib = np.zeros(1 << 20, dtype=np.uint8)
-    for key in range(3):
-        cache.put(key, mib)
-    assert cache.get(0) is mib  # 0 is now the most recently used
-    cache.put(3, mib)
-    assert cache.get(1) is None and cache.get(0) is mib and cache.get(3) is mib
-    assert cache.bytes == 3 << 20 and len(cache) == 3
-    cache.put(9, np.zeros(4 << 20, dtype=np.uint8))  # larger than the budget: not kept
-    assert cache.get(9) is None and len(cache) == 3

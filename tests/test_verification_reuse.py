@@ -136,8 +136,10 @@ def test_the_pipeline_hands_its_conditioned_scans_to_verification(tiny_loop: Rad
         pipeline = Pipeline(tiny_loop, dataclasses.replace(config, concurrency=concurrency))
         runs.append((pipeline, pipeline.run()))
     cfg = config.loop_closure
-    own = LoopDetector(cfg, scan_loader=lambda k: tiny_loop[k], verifier=_Wrapped(cfg))
-    without = Pipeline(tiny_loop, config, loop_detector=own).run()
+    unoffered = Pipeline(tiny_loop, config)  # its database scans from the run's records too
+    assert isinstance(unoffered.loop_detector, LoopDetector)
+    unoffered.loop_detector.verifier = _Wrapped(cfg)
+    without = unoffered.run()
     for pipeline, results in runs:
         detector = pipeline.loop_detector
         assert isinstance(detector, LoopDetector)

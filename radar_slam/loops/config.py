@@ -185,8 +185,14 @@ LOOP_CLOSURE_REMOVED_KEYS = {
     ),
     "loops_per_query": f"{CONSTANT} (radar_slam.loops.detector.LOOPS_PER_QUERY)",
     "covariance": f"{CONSTANT} (radar_slam.loops.verification.LOOP_COVARIANCE)",
-    "scan_cache_mb": f"{CONSTANT} (radar_slam.loops.detector.SCAN_CACHE_MB)",
-    "pose_image_cache_mb": f"{CONSTANT} (radar_slam.loops.verification.POSE_IMAGE_CACHE_MB)",
+    "scan_cache_mb": (
+        "a run keeps no scans: it verifies a database scan from its record "
+        "(radar_slam.maps.keyframes)"
+    ),
+    "pose_image_cache_mb": (
+        "a database scan's pose spectrum is made each time it is a candidate (keeping them "
+        "saved nothing measurable)"
+    ),
 }
 
 

@@ -30,7 +30,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from odometry import OdometryConfig, Scan, Velocity
-from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LOOP_RAPLACE, LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
 from radar_slam.loops.recent import HeldBackDatabase, held_back_retrieval, within_reach
@@ -51,7 +50,7 @@ from radar_slam.loops.sweep_twist import (
 )
 from radar_slam.loops.throttle import StretchThrottle
 from radar_slam.loops.tracking import Refiner, predicted_loop
-from radar_slam.loops.verification import GeometricVerifier, Verifier
+from radar_slam.loops.verification import GeometricVerifier, Verifier, sweep_s
 from raplace import NS_PER_S, Candidate, DescriptorExtractor, PlaceRecognizer, Recognizer, between
 
 log = logging.getLogger(__name__)
@@ -65,9 +64,6 @@ PREDICTED_CHECKS = True
 """A candidate on a closed stretch is checked by the phase-correlation refinement alone, from the
 loop the stretch's latest one predicts (`radar_slam.loops.tracking`; verified in full when that
 fails): about half a verification's cost per candidate on a revisit."""
-SCAN_CACHE_MB = 384.0
-"""Database scans kept in memory for verification [MiB] (the least recently used beyond it are
-read again through the detector's `scan_loader`; about 1.3 MiB per MulRan scan)."""
 DescriptorListener = Callable[[int, NDArray[np.float32]], None]
 """Takes a scan's key and its RaPlace descriptor (`LoopDetector`'s `on_describe`)."""
 
@@ -139,6 +135,7 @@ class _Entry:
     scan: Scan | None
     segment: int = 0
     twist_change: FloatArray | None = None  # across the scan: the loop covariance's de-skew term
+    sweep_s: float | None = None  # the scan's sweep duration [s], for the same terms
 
 
 class LoopDetector:
@@ -153,9 +150,10 @@ class LoopDetector:
 
     Args:
         config: loop-closing settings (defaults when None).
-        scan_loader: returns the scan of a key again when it is needed for verification and is
-            no longer among the `SCAN_CACHE_MB` of recent scans kept; without it the
-            detector keeps every database scan in memory (about 1.3 MB per MulRan scan).
+        scan_loader: returns what a database scan's key is verified against, each time it is a
+            candidate (the pipeline: the scan's record image, `radar_slam.maps.keyframes`, so
+            that no scan is read twice); without it the detector keeps every database scan in
+            memory (about 1.3 MB per MulRan scan).
         recognizer: the place database (default: RaPlace `PlaceRecognizer`).
         verifier: the geometric verifier (default: `GeometricVerifier` with `odometry`).
         odometry: the odometry settings of the poses given (their vehicle limits) and of the
@@ -203,7 +201,6 @@ class LoopDetector:
         self.gate = ConsistencyGate(cfg.consistency)
         self.throttle = StretchThrottle(cfg.throttle)
         self._entries: dict[int, _Entry] = {}
-        self._scans: ByteBudgetCache[Scan] = ByteBudgetCache(SCAN_CACHE_MB, _scan_bytes)
         self._decisions: list[LoopDecision] = []
         self._tally: Counter[str] = Counter()
         self._track = _Track()
@@ -379,12 +376,8 @@ class LoopDetector:
     def _scan_of(self, entry: _Entry) -> Scan:
         if entry.scan is not None:
             return entry.scan
-        scan = self._scans.get(entry.key)
-        if scan is None:
-            assert self.scan_loader is not None
-            scan = self.scan_loader(entry.key)
-            self._scans.put(entry.key, scan)
-        return scan
+        assert self.scan_loader is not None
+        return self.scan_loader(entry.key)
 
     def _query_and_insert(
         self,
@@ -423,10 +416,9 @@ class LoopDetector:
             scan=None if self.scan_loader is not None else scan,
             segment=held.segment,
             twist_change=change,
+            sweep_s=sweep_s(scan),
         )
         self._entries[key] = entry
-        if entry.scan is None:
-            self._scans.put(key, scan)
         self.proposed += len(candidates)
         changes: dict[int, LoopStatus] = {}
         if pose is not None and not self.throttle.due(
@@ -438,7 +430,12 @@ class LoopDetector:
         for candidate in candidates:  # at most `candidates` (k), best first
             match = self._entries[candidate.key]
             match_scan = KeyScan(
-                match.key, match.timestamp_ns, self._scan_of(match), match.twist, match.twist_change
+                match.key,
+                match.timestamp_ns,
+                self._scan_of(match),
+                match.twist,
+                match.twist_change,
+                sweep_s=match.sweep_s,
             )
             result = self._verify(entry, match, query, match_scan)
             decision = len(self._decisions)
@@ -526,12 +523,6 @@ class LoopDetector:
             if status == "accepted":
                 accepted.append(new.constraint())
         return accepted
-
-
-def _scan_bytes(scan: Scan) -> int:
-    """Bytes a scan keeps in memory (its arrays)."""
-    arrays = (scan.polar, scan.azimuths_rad, scan.azimuth_times_ns)
-    return sum(int(np.asarray(a).nbytes) for a in arrays if a is not None)
 
 
 class NullLoopDetector:

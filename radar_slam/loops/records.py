@@ -139,6 +139,9 @@ class KeyScan:
         twist_span_s: time between the two odometry steps' middles the twist was interpolated
             between [s] (about the scan interval), or None; at low frame rates the sweep's yaw
             rate can be far from that interpolation (`verification.YAW_RATE_SEARCH`).
+        sweep_s: how long the scan's sweep lasted [s] when `scan` has no azimuth times but
+            stands for one that had (a scan's record: its image already de-skewed), or None;
+            the loop covariance's de-skew terms grow with it.
     """
 
     key: int
@@ -147,6 +150,7 @@ class KeyScan:
     twist: FloatArray | None = None
     twist_change: FloatArray | None = None
     twist_span_s: float | None = None
+    sweep_s: float | None = None
 
 
 @dataclass(frozen=True)

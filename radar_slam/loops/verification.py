@@ -33,7 +33,6 @@ from odometry import (
     register,
     searched_registration,
 )
-from radar_slam.loops.cache import ByteBudgetCache
 from radar_slam.loops.config import LOOP_RAPLACE, LoopClosureConfig, LoopCovarianceConfig
 from radar_slam.loops.records import KeyScan, Verification
 from raplace import (
@@ -75,9 +74,6 @@ in a turn at 1 Hz the interpolated yaw rate can be tens of deg/s off the sweep's
 LOOP_COVARIANCE = LoopCovarianceConfig()
 """The covariance model of verified loops (see `LoopCovarianceConfig` for its terms and
 docs/decisions.md for their calibration against the simulator's ground truth)."""
-POSE_IMAGE_CACHE_MB = 96.0
-"""The verifier's pose spectra of database scans kept [MiB] (about 0.6 MiB each with the loop
-closer's pose image): a scan is often a candidate of several queries."""
 
 
 def loop_covariance(
@@ -144,11 +140,18 @@ def swept_turn_variance(*scans: KeyScan) -> float:
     return total
 
 
-def _half_sweep_s(key_scan: KeyScan) -> float | None:
-    times = key_scan.scan.azimuth_times_ns
+def sweep_s(scan: Scan) -> float | None:
+    """How long a scan's sweep lasted [s] (None without azimuth times)."""
+    times = scan.azimuth_times_ns
     if times is None or len(times) == 0:
         return None
-    return 0.5 * float(np.max(times) - np.min(times)) / NS_PER_S
+    return float(np.max(times) - np.min(times)) / NS_PER_S
+
+
+def _half_sweep_s(key_scan: KeyScan) -> float | None:
+    sweep = sweep_s(key_scan.scan)
+    sweep = key_scan.sweep_s if sweep is None else sweep
+    return None if sweep is None else 0.5 * sweep
 
 
 def turned(scan: Scan, turn_rad: float) -> RadarFrame:
@@ -212,9 +215,9 @@ class GeometricVerifier:
     """Sinogram relative pose, refined by phase correlation (see the module docstring).
 
     Caches the current query's pose spectrum and prepared scan, so verifying several candidates
-    of one query conditions the query scan once, and the pose spectra of recent database scans
-    (by key and time, within `POSE_IMAGE_CACHE_MB`): a scan is often a candidate of several
-    queries.
+    of one query conditions the query scan once. A database scan's pose spectrum is made each
+    time it is a candidate (from its record in a run; keeping them saved nothing measurable on
+    `synthetic/long`).
 
     Args:
         cfg: loop-closing settings (its `verification` section).
@@ -231,9 +234,6 @@ class GeometricVerifier:
         self.cfg = cfg
         self.odometry = OdometryConfig() if odometry is None else odometry
         self.pose_estimator = PoseEstimator(LOOP_RAPLACE.pose)
-        self._map_spectra: ByteBudgetCache[PoseSpectrum] = ByteBudgetCache(
-            POSE_IMAGE_CACHE_MB, lambda spectrum: spectrum.nbytes
-        )
         self._query_key: int | None = None
         self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
@@ -308,19 +308,11 @@ class GeometricVerifier:
             return estimate
         return searched_registration(prepared, aligned, estimate, self.odometry, query.twist_span_s)
 
-    def _map_spectrum(self, match: KeyScan) -> PoseSpectrum:
-        key = (match.key, int(match.timestamp_ns))  # a key reused for another scan misses
-        spectrum = self._map_spectra.get(key)
-        if spectrum is None:
-            spectrum = self._spectrum(match.scan)
-            self._map_spectra.put(key, spectrum)
-        return spectrum
-
     def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
         """Verify T_query_match; never raises for a bad match (the reason says why)."""
         vcfg = self.cfg.verification
         rel: RelativePose = self.pose_estimator.estimate_spectra(
-            self._query(query), self._map_spectrum(match)
+            self._query(query), self._spectrum(match.scan)
         )
         sinogram = motion_compensated(rel.as_array(), query, match)
         nan33 = np.full((3, 3), np.nan)

@@ -1,14 +1,16 @@
-"""Map keyframes made as a run goes: each keyframe's descriptor and image, made once.
+"""Scan records made as a run goes: each kept scan's descriptor and image, made once.
 
 A map stores, per keyframe, its RaPlace descriptor and its de-skewed Cartesian image
 (`radar_slam.maps.images`). `KeyframeRecorder` receives every scan of a run once the odometry has
 registered the scan after it: the raw scan, its conditioned form (`odometry.Odometry.prepared`)
-and its odometry result. It picks the keyframes along the odometry path (`KeyframeSpacing`) and
-makes their descriptor and image as soon as the step after the scan is known (the image is
-de-skewed with the scan's sweep twist, `radar_slam.loops.sweep_twist`); a descriptor the loop
-detector made of the same scan is taken rather than made again (`offer_descriptor`). It keeps
-what the map stores (about 30 kB per keyframe at the default image geometry), never the scans,
-so that `radar_slam.maps.build.build_map` writes the map without reading a scan again.
+and its odometry result. It makes a record of the map keyframes along the odometry path
+(`KeyframeSpacing`, when the run keeps a map) and of every scan the loop detector enters into its
+place database (`offer_descriptor`), as soon as the step after the scan is known (the image is
+de-skewed with the scan's sweep twist, `radar_slam.loops.sweep_twist`); the descriptor is the one
+the loop detector made of the scan when it made one. It keeps the records (about 30 kB per scan
+at the default image geometry), never the scans: the loop verifier takes a database scan back
+from its record (`scan`), and `radar_slam.maps.build.build_map` writes the map from them, so
+that no scan is read twice.
 
 `describe_keyframe` is the one recipe of a keyframe's content, used by the recorder and by the
 rebuild from a sequence (`radar_slam.maps.build.describe_keyframes`): a map made either way is
@@ -24,7 +26,16 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryConfig, OdometryResult, PolarScan, Scan, Velocity, preprocess_polar
+from odometry import (
+    OdometryConfig,
+    OdometryResult,
+    PolarScan,
+    RadarFrame,
+    Scan,
+    Velocity,
+    preprocess_polar,
+)
+from radar_slam.errors import RadarSlamError
 from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_velocity, sweep_twist
 from radar_slam.maps.config import MapsConfig
 from radar_slam.maps.images import KEYFRAME_IMAGE, ImageGeometry, KeyframeImager
@@ -145,37 +156,48 @@ class _Held:
     Attributes:
         result: its odometry result.
         before: the velocity of the step into it (None: first scan, or not plausible).
-        frame, polar: the scan and its conditioned form, for a keyframe only (else None).
+        frame, polar: the scan and its conditioned form (None: made when it is recorded).
+        keyframe: whether it is a map keyframe.
     """
 
     result: OdometryResult
     before: Velocity | None
-    frame: Scan | None
+    frame: Scan
     polar: PolarScan | None
+    keyframe: bool
 
 
 class KeyframeRecorder:
     """Picks a run's map keyframes and makes their records as the scans come (see the module doc).
 
     Call `add` for every scan in order, `offer_descriptor` (optional) between the `add` of a scan
-    and the `add` of the next, and `finish` once after the last; all from one thread.
+    and the `add` of the next, and `finish` once after the last; all from one thread (`scan` too).
 
     Args:
         maps: the keyframe spacing (the image geometry is `KEYFRAME_IMAGE`).
         odometry: the odometry settings (conditioning, the vehicle's limits).
         descriptor: the RaPlace descriptor settings.
+        keep_map: record the map keyframes (else only the scans offered a descriptor).
     """
 
     def __init__(
-        self, maps: MapsConfig, odometry: OdometryConfig, descriptor: DescriptorConfig
+        self,
+        maps: MapsConfig,
+        odometry: OdometryConfig,
+        descriptor: DescriptorConfig,
+        keep_map: bool = True,
     ) -> None:
         self.maps = maps
         self.odometry = odometry
         self.descriptor_config = descriptor
+        self.keep_map = keep_map
         self.imager = KeyframeImager(KEYFRAME_IMAGE, odometry)
         self.describe = DescriptorExtractor(descriptor)
         self.spacing = KeyframeSpacing(maps.keyframe_spacing_m)
-        self._records: list[KeyframeRecord] = []
+        self._keyframes: list[int] = []
+        self.records: dict[int, tuple[KeyframeRecord, int]] = {}
+        """Scan index -> (its record, its timestamp [ns]): the map keyframes and the scans
+        offered a descriptor."""
         self._held: _Held | None = None
         self._offered: tuple[int, NDArray[np.float16]] | None = None
         self.descriptors_taken = 0
@@ -183,22 +205,38 @@ class KeyframeRecorder:
 
     def add(self, frame: Scan, polar: PolarScan | None, result: OdometryResult) -> None:
         """Receive the next scan: the raw scan, its conditioned form (None: made here when it is
-        a keyframe) and its odometry result (final: the next scan has registered)."""
+        recorded) and its odometry result (final: the next scan has registered)."""
         held = self._held
         before = None if held is None else step_velocity(held.result, result, self.odometry)
         if held is not None:
             self._make(held, after=before)
-        if self.spacing.is_keyframe(result.pose):
-            self._held = _Held(result, before, frame, polar)
-        else:
-            self._held = _Held(result, before, None, None)
+        keyframe = self.spacing.is_keyframe(result.pose) and self.keep_map
+        self._held = _Held(result, before, frame, polar, keyframe)
 
     def offer_descriptor(self, scan_index: int, descriptor: NDArray[np.floating]) -> None:
-        """The descriptor of a scan made elsewhere (the loop detector, with the same settings):
-        kept when it is the last scan received and a keyframe."""
+        """The descriptor of the last scan received, made elsewhere (the loop detector, with the
+        same settings, as the scan enters its database): the scan is recorded with it."""
         held = self._held
-        if held is not None and held.frame is not None and held.result.index == scan_index:
+        if held is not None and held.result.index == scan_index:
             self._offered = (scan_index, np.asarray(descriptor, dtype=DESCRIPTOR_DTYPE))
+
+    def scan(self, scan_index: int) -> RadarFrame:
+        """A recorded scan as its image sampled back onto a polar grid
+        (`KeyframeImager.pseudo_scan`): what the loop verifier takes of a database scan.
+
+        Raises:
+            RadarSlamError: scan `scan_index` has no record (not offered a descriptor).
+        """
+        recorded = self.records.get(int(scan_index))
+        if recorded is None:
+            raise RadarSlamError(f"scan {scan_index} has no record (not in the loop database)")
+        record, timestamp_ns = recorded
+        return self.imager.pseudo_scan(record.png, timestamp_ns)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the records take (images and descriptors)."""
+        return sum(len(r.png) + r.descriptor.nbytes for r, _ in self.records.values())
 
     def finish(self) -> RecordedKeyframes:
         """Make the last scan's record (no step after it) and return every keyframe's."""
@@ -207,11 +245,11 @@ class KeyframeRecorder:
             self._held = None
         log.info(
             "map keyframes: %d made during the run, %d with the loop detector's descriptor",
-            len(self._records),
+            len(self._keyframes),
             self.descriptors_taken,
         )
         return RecordedKeyframes(
-            tuple(self._records),
+            tuple(self.records[scan][0] for scan in self._keyframes),
             self.maps.keyframe_spacing_m,
             KEYFRAME_IMAGE,
             self.descriptor_config,
@@ -219,19 +257,20 @@ class KeyframeRecorder:
         )
 
     def _make(self, held: _Held, after: Velocity | None) -> None:
-        if held.frame is None:
-            return
         index = held.result.index
         offered = self._offered
         self._offered = None
         descriptor = offered[1] if offered is not None and offered[0] == index else None
-        self.descriptors_taken += descriptor is not None
+        if descriptor is None and not held.keyframe:
+            return
+        self.descriptors_taken += descriptor is not None and held.keyframe
+        if held.keyframe:
+            self._keyframes.append(index)
         twist = sweep_twist(held.before, after, mean_acquisition_time_ns(held.frame))
-        self._records.append(
-            describe_keyframe(
-                index, held.frame, twist, self.imager, self.describe, held.polar, descriptor
-            )
+        record = describe_keyframe(
+            index, held.frame, twist, self.imager, self.describe, held.polar, descriptor
         )
+        self.records[index] = (record, int(held.frame.timestamp_ns))
 
 
 class KeyframeStage(Protocol):
@@ -240,6 +279,8 @@ class KeyframeStage(Protocol):
     def add(self, frame: Scan, polar: PolarScan | None, result: OdometryResult) -> None: ...
 
     def offer_descriptor(self, scan_index: int, descriptor: NDArray[np.floating]) -> None: ...
+
+    def scan(self, scan_index: int) -> RadarFrame: ...
 
     def finish(self) -> RecordedKeyframes | None: ...
 
@@ -252,6 +293,14 @@ class NullKeyframeRecorder:
 
     def offer_descriptor(self, scan_index: int, descriptor: NDArray[np.floating]) -> None:
         """Ignore the descriptor."""
+
+    def scan(self, scan_index: int) -> RadarFrame:
+        """No scan is recorded.
+
+        Raises:
+            RadarSlamError: always.
+        """
+        raise RadarSlamError(f"scan {scan_index} has no record (the run keeps none)")
 
     def finish(self) -> None:
         """Nothing was recorded."""

@@ -17,8 +17,8 @@ Both keep the results independent of timing:
   (`radar_slam.maps.keyframes`): the conditioned form is the one the odometry made, and the
   descriptor the one the detector made, when it made one.
 
-Every reading of the sequence goes through one lock (`LockedReader`): a loader may keep a file
-open (ROS bags), and the loop detector re-reads database scans from its own thread.
+A run reads each scan once, on the reader thread (or the caller's): the loop detector verifies
+database scans from their records (`radar_slam.maps.keyframes`), never reading them again.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from odometry import OdometryResult, PreparedScan
-from radar_slam.datasets.frame import RadarFrame, RadarSequence
+from radar_slam.datasets.frame import RadarFrame
 from radar_slam.loops import LoopConstraint, LoopDecision, LoopDetectorProtocol
 from radar_slam.maps.keyframes import KeyframeStage, NullKeyframeRecorder
 from radar_slam.pipeline.steps import StepTimer
@@ -43,18 +43,6 @@ Offer = Callable[[int, PreparedScan], None]
 """Takes a scan's key and its conditioned form (`GeometricVerifier.offer`)."""
 _STOP_POLL_S = 0.1
 """How often a blocked thread checks whether it was asked to stop [s]."""
-
-
-class LockedReader:
-    """Scans of a sequence read under one lock (safe from several threads)."""
-
-    def __init__(self, sequence: RadarSequence) -> None:
-        self.sequence = sequence
-        self._lock = threading.Lock()
-
-    def __call__(self, index: int) -> RadarFrame:
-        with self._lock:
-            return self.sequence[index]
 
 
 @dataclass(frozen=True)

@@ -65,18 +65,37 @@ def load_config(
 ) -> PipelineConfig:
     """Defaults in code, then `configs/<family>.yaml` (when shipped), then the file `path`, then
     `overrides` (a nested mapping). Unknown keys and wrong types are `ConfigError`s."""
-    config = PipelineConfig()
-    if family is not None:
-        shipped = family_config_path(family)
-        if shipped.is_file():
-            config = merge(PipelineConfig, config, read_yaml(shipped), str(shipped))
+    return _layered(family, _user_layers(path, overrides))
+
+
+_Layer = tuple[dict[str, Any], str]
+"""A mapping of config keys and where it came from (for error messages)."""
+
+
+def _user_layers(path: Path | None, overrides: dict[str, Any] | None) -> list[_Layer]:
+    """The user's layers: the file `path` (read once here), then `overrides`."""
+    layers: list[_Layer] = []
     if path is not None:
         path = Path(path)
         if not path.is_file():
             raise ConfigError(f"{path}: config file not found")
-        config = merge(PipelineConfig, config, read_yaml(path), str(path))
+        layers.append((read_yaml(path), str(path)))
     if overrides:
-        config = merge(PipelineConfig, config, overrides, "overrides")
+        layers.append((overrides, "overrides"))
+    return layers
+
+
+def _layered(family: str | None, user: list[_Layer]) -> PipelineConfig:
+    """Defaults, then the family's shipped YAML (when `family` is given and ships one), then
+    the `user` layers in order."""
+    config = PipelineConfig()
+    layers = list(user)
+    if family is not None:
+        shipped = family_config_path(family)
+        if shipped.is_file():
+            layers.insert(0, (read_yaml(shipped), str(shipped)))
+    for values, source in layers:
+        config = merge(PipelineConfig, config, values, source)
     return config
 
 
@@ -89,17 +108,19 @@ def open_configured(
     """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`,
     then `overrides`, e.g. one configuration of a `radar-slam batch` grid).
 
-    The family, known only once the sequence is found, selects the shipped overrides; when the
-    configuration's `dataset` section changes loader settings, the sequence is opened again
-    with them (opening is lazy). The ground truth and the first scan are then read, so that a
-    malformed file fails before any work rather than after it.
+    Each file is read once. The user's layers are checked first, so that a mistake fails before
+    any data is generated; the family, known only once the sequence is found, selects the
+    shipped overrides, and the sequence is opened again (opening is lazy) only when those change
+    its loader settings. The ground truth is then read, so that a malformed file fails before
+    any work rather than after it; a malformed scan fails when the run reads it (the first scan
+    is the run's first step: reading it here would decode it twice).
     """
-    early = load_config(None, path, overrides)  # a mistake fails before any data is generated
-    options = early.dataset if early.dataset.loader_options() else None
-    sequence = open_sequence(spec, data_root, options)  # with e.g. --topic from the first
-    config = load_config(sequence.family, path, overrides)
-    if config.dataset.loader_options():
+    user = _user_layers(path, overrides)
+    early = _layered(None, user)  # a mistake fails before any data is generated
+    options = early.dataset.loader_options()
+    sequence = open_sequence(spec, data_root, early.dataset if options else None)
+    config = _layered(sequence.family, user)
+    if config.dataset.loader_options() != options:
         sequence = open_sequence(spec, data_root, config.dataset)
     _ = sequence.ground_truth  # a malformed GT file fails now, not after the run
-    _ = sequence[0]  # ... and so does a first scan of the wrong shape or format
     return sequence, config

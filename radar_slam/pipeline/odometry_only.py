@@ -8,7 +8,7 @@ import numpy as np
 
 from odometry import Odometry
 from radar_slam.datasets.frame import RadarSequence
-from radar_slam.pipeline.concurrency import LockedReader, ScanReader
+from radar_slam.pipeline.concurrency import ScanReader
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.pipeline.records import (
     OdometryRun,
@@ -41,7 +41,7 @@ def run_odometry(
     odometry = Odometry(config.odometry)
     start = time.perf_counter()
     depth = config.concurrency.read_ahead_scans
-    with ScanReader(LockedReader(sequence), frames, depth) as reader:
+    with ScanReader(sequence.__getitem__, frames, depth) as reader:
         for index in range(frames):
             odometry.register(reader.next())
             if progress is not None:

@@ -54,7 +54,6 @@ from radar_slam.maps.keyframes import (
 )
 from radar_slam.pipeline.concurrency import (
     InlineLoopRunner,
-    LockedReader,
     ScanReader,
     make_loop_runner,
 )
@@ -101,11 +100,13 @@ class Pipeline:
         progress: called after each scan with a `Progress` (e.g. to drive a progress bar).
         loop_detector: a detector to use instead of the configured one (e.g. one with another
             place recognizer or verifier); it must not have seen scans yet. Its keys are the scan
-            indices.
+            indices; it keeps or loads its database scans itself (the configured one verifies
+            them from the run's records, `radar_slam.maps.keyframes`).
         observer: watches the run scan by scan (e.g. the live viewer); see
             `radar_slam.pipeline.observer.PipelineObserver`.
         record_map: keep each map keyframe's descriptor and image as the run goes
-            (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again).
+            (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again);
+            the database scans of the loop detector are recorded either way.
     """
 
     def __init__(
@@ -124,12 +125,12 @@ class Pipeline:
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
-        self._read_scan = LockedReader(sequence)
-        self.keyframes = self._keyframe_stage(record_map)
+        self.record_map = record_map
+        self.keyframes = self._keyframe_stage(record_map, loop_detector is None)
         self.loop_detector: LoopDetectorProtocol = (
             make_loop_detector(
                 self.config.loop_closure,
-                scan_loader=self._reread,
+                scan_loader=self.keyframes.scan,
                 on_describe=self.keyframes.offer_descriptor,
                 odometry=self.config.odometry,
             )
@@ -162,7 +163,9 @@ class Pipeline:
         On an error or an interruption the threads are stopped before it propagates.
         """
         self._start = time.perf_counter()
-        reader = ScanReader(self._read_scan, self.frames, self.config.concurrency.read_ahead_scans)
+        reader = ScanReader(
+            self.sequence.__getitem__, self.frames, self.config.concurrency.read_ahead_scans
+        )
         try:
             held: tuple[RadarFrame, PreparedScan | None] | None = None
             for index in range(self.frames):
@@ -182,7 +185,8 @@ class Pipeline:
             self._report(self.frames, "last loops")
             self._close_loops(self.loops.finish(), None)
             with self.timer("map keyframes"):
-                self._map_keyframes = self.keyframes.finish()
+                recorded = self.keyframes.finish()
+                self._map_keyframes = recorded if self.record_map else None
         finally:
             reader.close()
             self.loops.close()
@@ -195,21 +199,22 @@ class Pipeline:
             self.observer.on_finish(results)
         return results
 
-    def _keyframe_stage(self, record_map: bool) -> KeyframeStage:
-        """The map keyframes of the run: made as it goes, or not kept."""
-        if not record_map:
-            return NullKeyframeRecorder()
+    def _keyframe_stage(self, record_map: bool, own_detector: bool) -> KeyframeStage:
+        """The scan records of the run (`radar_slam.maps.keyframes`): the map keyframes when
+        `record_map`, and the loop database's scans when the run's own detector closes loops
+        (it verifies them from their records); else nothing is kept."""
         cfg = self.config
-        return KeyframeRecorder(cfg.maps, cfg.odometry, LOOP_RAPLACE.descriptor)
+        loops = own_detector and cfg.loop_closure.enabled
+        if not (record_map or loops):
+            return NullKeyframeRecorder()
+        return KeyframeRecorder(
+            cfg.maps, cfg.odometry, LOOP_RAPLACE.descriptor, keep_map=record_map
+        )
 
     # -- per-scan steps -----------------------------------------------------------------------
     def _read(self, reader: ScanReader) -> RadarFrame:
         with self.timer("read"):
             return reader.next()
-
-    def _reread(self, index: int) -> RadarFrame:
-        """A database scan read again for loop verification (timed as loop detection)."""
-        return self._read_scan(index)
 
     def _track(self, frame: RadarFrame) -> OdometryResult:
         with self.timer("odometry"):

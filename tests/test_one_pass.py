@@ -1,0 +1,219 @@
+"""One pass per scan: a SLAM run decodes each scan once, conditions it once and describes it
+once; the loop verifier takes a database scan back from its record, `radar-slam run` reads its
+config files and opens its sequence once, and what a run keeps per scan, on a 10,000-scan drive,
+stays within the memory budget (`GROWTH_BUDGET_BYTES`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import tracemalloc
+from collections import Counter
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pytest
+
+from odometry import preprocess_polar
+from radar_slam.cli import main
+from radar_slam.datasets.frame import RadarFrame, RadarSequence
+from radar_slam.maps.images import PSEUDO_SENSOR
+from radar_slam.maps.keyframes import KeyframeRecorder
+from radar_slam.pipeline import Pipeline, PipelineConfig, Progress, Results, load_config
+from raplace import DescriptorExtractor, PoseEstimator
+
+CONDITIONING_SITES = (
+    "odometry.odometry",
+    "odometry.registration",
+    "radar_slam.maps.images",
+    "radar_slam.maps.keyframes",
+)
+"""The modules that call the odometry's conditioning (`preprocess_polar`) on a scan."""
+DRIVE_SCANS = 10_000
+"""The drive the memory budget is stated for (MulRan resolution, default config)."""
+GROWTH_BUDGET_BYTES = 600 * 2**20
+"""What a run may keep per scan, times `DRIVE_SCANS` (docs/benchmarks.md, Memory budget)."""
+WARM_SCANS = 40
+"""Scans after which the run's fixed working memory is allocated (odometry images, caches)."""
+
+
+def content_key(polar: np.ndarray) -> str:
+    """A scan's polar image as a key (the same image: the same key)."""
+    return hashlib.sha1(np.ascontiguousarray(polar).tobytes()).hexdigest()
+
+
+@dataclass
+class Counts:
+    """What a run did to its scans.
+
+    Attributes:
+        decodes: scan index -> reads of the sequence.
+        conditioned: scan timestamp [ns] -> odometry conditionings of the scan itself.
+        record_conditioned: conditionings of database scans remade from their records.
+        described: polar image -> RaPlace descriptors made of it.
+        pose_images: polar image of a scan -> RaPlace pose images made of it.
+        records_read: database scans taken back from their records for verification.
+        record_pose_images: RaPlace pose images made of those.
+    """
+
+    decodes: Counter[int]
+    conditioned: Counter[int]
+    record_conditioned: int
+    described: Counter[str]
+    pose_images: Counter[str]
+    records_read: int
+    record_pose_images: int
+
+
+@contextmanager
+def counting(sequence: RadarSequence) -> Iterator[Counts]:
+    """Count, while in the block, the reads of `sequence`'s scans, the odometry's conditionings,
+    the RaPlace descriptors and pose images, and the records read back."""
+    kind = type(sequence)
+    with ExitStack() as stack:
+        read = stack.enter_context(
+            mock.patch.object(kind, "__getitem__", autospec=True, side_effect=kind.__getitem__)
+        )
+        conditionings = [
+            stack.enter_context(mock.patch(f"{site}.preprocess_polar", wraps=preprocess_polar))
+            for site in CONDITIONING_SITES
+        ]
+        describe = stack.enter_context(
+            mock.patch.object(
+                DescriptorExtractor,
+                "__call__",
+                autospec=True,
+                side_effect=DescriptorExtractor.__call__,
+            )
+        )
+        pose = stack.enter_context(
+            mock.patch.object(
+                PoseEstimator, "image", autospec=True, side_effect=PoseEstimator.image
+            )
+        )
+        records: list[RadarFrame] = []
+        scan_of_record = KeyframeRecorder.scan
+
+        def read_record(recorder: KeyframeRecorder, scan_index: int) -> RadarFrame:
+            records.append(scan_of_record(recorder, scan_index))
+            return records[-1]
+
+        stack.enter_context(mock.patch.object(KeyframeRecorder, "scan", read_record))
+        counts = Counts(Counter(), Counter(), 0, Counter(), Counter(), 0, 0)
+        yield counts
+        counts.decodes.update(int(call.args[1]) for call in read.call_args_list)
+        scans = [call.args[0] for m in conditionings for call in m.call_args_list]
+        counts.conditioned.update(int(s.timestamp_ns) for s in scans if s.sensor != PSEUDO_SENSOR)
+        counts.record_conditioned = sum(s.sensor == PSEUDO_SENSOR for s in scans)
+        counts.described.update(content_key(call.args[1]) for call in describe.call_args_list)
+        from_records = {content_key(frame.polar) for frame in records}
+        imaged = [content_key(call.args[1]) for call in pose.call_args_list]
+        counts.pose_images.update(key for key in imaged if key not in from_records)
+        counts.record_pose_images = sum(key in from_records for key in imaged)
+        counts.records_read = len(records)
+
+
+@dataclass(frozen=True)
+class CountedRun:
+    results: Results
+    pipeline: Pipeline
+    counts: Counts
+
+
+@pytest.fixture(scope="module")
+def counted_run(tiny_loop: RadarSequence) -> CountedRun:
+    """The whole of tiny_loop (it comes back to its start: loops are verified), with its map."""
+    with counting(tiny_loop) as counts:
+        pipeline = Pipeline(tiny_loop, load_config("synthetic"), record_map=True)
+        results = pipeline.run()
+    return CountedRun(results, pipeline, counts)
+
+
+def test_each_scan_is_decoded_once(counted_run: CountedRun) -> None:
+    frames = counted_run.results.metrics.frames
+    assert frames == 177
+    assert counted_run.counts.decodes == Counter(range(frames))
+
+
+def test_database_scans_are_verified_from_their_records(counted_run: CountedRun) -> None:
+    metrics = counted_run.results.metrics
+    assert metrics.loops_accepted >= 4
+    assert metrics.loops_accepted_true == metrics.loops_accepted
+    counts = counted_run.counts
+    assert counts.records_read >= metrics.loops_proposed
+    # each record read back is conditioned for its registration (the scan itself never again),
+    # and imaged for the sinogram pose unless the loop was checked from a prediction
+    assert counts.record_conditioned == counts.records_read
+    assert 0 < counts.record_pose_images <= counts.records_read
+
+
+def test_each_scan_is_conditioned_once(tiny_loop: RadarSequence, counted_run: CountedRun) -> None:
+    stamps = np.asarray(tiny_loop.timestamps_ns)[: counted_run.results.metrics.frames]
+    assert counted_run.counts.conditioned == Counter(int(t) for t in stamps)
+
+
+def test_each_scan_is_described_once(counted_run: CountedRun) -> None:
+    counts, pipeline = counted_run.counts, counted_run.pipeline
+    database = len(pipeline.loop_detector)  # type: ignore[arg-type]
+    assert database >= 40
+    assert max(counts.described.values()) == 1
+    assert sum(counts.described.values()) == database  # the map took the detector's
+    recorded = counted_run.results.map_keyframes
+    assert recorded is not None
+    taken = pipeline.keyframes.descriptors_taken  # type: ignore[attr-defined]
+    assert taken == len(recorded.records)
+    assert max(counts.pose_images.values()) == 1
+
+
+def test_radar_slam_run_opens_and_configures_once(
+    tiny_loop: RadarSequence, synthetic_root: Path, tmp_path: Path
+) -> None:
+    from radar_slam.pipeline import config as pipeline_config
+
+    frames = 12
+    user = tmp_path / "user.yaml"
+    user.write_text("loop_closure: {candidates: 3}\n")
+    args = ["run", "synthetic/tiny_loop", "--out", str(tmp_path / "out"), "--config", str(user)]
+    args += ["--max-frames", str(frames), "--data-root", str(synthetic_root)]
+    read_yaml, open_sequence = pipeline_config.read_yaml, pipeline_config.open_sequence
+    with (
+        counting(tiny_loop) as counts,
+        mock.patch.object(pipeline_config, "read_yaml", wraps=read_yaml) as reads,
+        mock.patch.object(pipeline_config, "open_sequence", wraps=open_sequence) as opens,
+    ):
+        assert main(args) == 0
+    read = Counter(Path(call.args[0]).name for call in reads.call_args_list)
+    assert read == Counter({"synthetic.yaml": 1, "user.yaml": 1})
+    assert opens.call_count == 1
+    assert counts.decodes == Counter(range(frames))
+
+
+def sequential(config: PipelineConfig) -> PipelineConfig:
+    """`config` without the reader and loop threads."""
+    concurrency = dataclasses.replace(config.concurrency, loop_thread=False, read_ahead_scans=0)
+    return dataclasses.replace(config, concurrency=concurrency)
+
+
+def test_what_a_run_keeps_per_scan_fits_the_budget(tiny_loop: RadarSequence) -> None:
+    """The memory a run still holds after each scan grows by what it keeps per scan (records,
+    database descriptors, odometry results, cached pose spectra): measured between scan
+    `WARM_SCANS` and the last, times `DRIVE_SCANS`, within the budget."""
+    held: dict[int, int] = {}
+
+    def measure(progress: Progress) -> None:
+        if not progress.step and progress.done in (WARM_SCANS, len(tiny_loop)):
+            held[progress.done] = tracemalloc.get_traced_memory()[0]
+
+    config = sequential(load_config("synthetic"))
+    tracemalloc.start()
+    try:
+        Pipeline(tiny_loop, config, progress=measure, record_map=True).run()
+    finally:
+        tracemalloc.stop()
+    per_scan = (held[len(tiny_loop)] - held[WARM_SCANS]) / (len(tiny_loop) - WARM_SCANS)
+    assert 5_000 < per_scan, f"{per_scan:.0f} bytes per scan"  # records, descriptors, results
+    assert per_scan * DRIVE_SCANS <= GROWTH_BUDGET_BYTES, f"{per_scan:.0f} bytes per scan"

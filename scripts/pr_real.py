@@ -63,7 +63,7 @@ BANDS_M = ((0.0, 5.0), (5.0, 10.0))
 SIMULATED = "synthetic/loop"
 NEGATIVE_M = 50.0
 NEAR_MISS_MIN_M = 5.0
-"""Near misses: candidates closer than this are left out (the neighbouring scans)."""
+"""Near misses: candidates closer than this are left out (the neighbouring scans) [m]."""
 NEAR_MISS_CRITERION_M = 10.0
 """Near misses: the chosen candidate is correct within this distance [m]."""
 RERANK_CANDIDATES = 5

@@ -36,9 +36,10 @@ class PreprocessConfig:
             values are clipped to 0.
         spoke_removal: then subtract each azimuth's median over range (removes the radial
             streaks of real Navtech scans, bright along whole azimuths: they stay with the
-            sensor and pull translation estimates toward zero). On by default for the relative
-            pose (`PoseConfig`); off for descriptors, whose distances it raised for neighbouring
-            scans (which share the streaks) as well as for other places.
+            sensor and pull translation estimates toward zero). Off by default here (the Scan
+            Context baseline keeps the plain clean-up); on for the relative pose (`PoseConfig`)
+            and for descriptors (`DescriptorConfig`), where it separates real scans a few metres
+            apart from those of other places better (docs/decisions.md).
         min_range_m: bins closer than this are zeroed (saturated near range, the vehicle) [m].
         noise_floor: intensity subtracted after the median removal, clipped at 0 (uint8 units).
         intensity: "linear" keeps the (dB-like) uint8 scale, "log1p" compresses it, "square"
@@ -101,7 +102,9 @@ class DescriptorConfig:
         magnitude: transform of |S^(theta, k)| before z-normalisation.
     """
 
-    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    preprocess: PreprocessConfig = field(
+        default_factory=lambda: PreprocessConfig(spoke_removal=True)
+    )
     image: ImageConfig = field(default_factory=ImageConfig)
     n_theta: int = 120
     theta_oversample: int = 2

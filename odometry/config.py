@@ -12,8 +12,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from raplace import checks
-
-CONSTANT = "now a constant of the method"
+from raplace.config_io import replaced_by_constant
 
 
 @dataclass(frozen=True)
@@ -55,8 +54,8 @@ class LevelConfig:
     """
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        "size_px": f"{CONSTANT} (odometry.registration.COARSE_SIZE_PX, FINE_SIZE_PX)",
-        "taper_fraction": f"{CONSTANT} (odometry.preprocess.TAPER_FRACTION)",
+        "size_px": replaced_by_constant("odometry.registration.COARSE_SIZE_PX, FINE_SIZE_PX"),
+        "taper_fraction": replaced_by_constant("odometry.preprocess.TAPER_FRACTION"),
     }
     cell_m: float
 
@@ -76,12 +75,14 @@ class QualityConfig:
     """
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        "max_prediction_error_m": f"{CONSTANT} (odometry.recovery.PREDICTION_TOLERANCE_M)",
-        "max_prediction_error_deg": f"{CONSTANT} (odometry.recovery.PREDICTION_TOLERANCE_DEG)",
-        "min_sigma_xy_m": f"{CONSTANT} (odometry.registration.MIN_SIGMA_XY_M)",
-        "min_sigma_yaw_deg": f"{CONSTANT} (odometry.registration.MIN_SIGMA_YAW_DEG)",
-        "velocity_lag_fraction": f"{CONSTANT} (odometry.uncertainty.VELOCITY_LAG_FRACTION)",
-        "deskew_error_fraction": f"{CONSTANT} (odometry.uncertainty.DESKEW_ERROR_FRACTION)",
+        "max_prediction_error_m": replaced_by_constant("odometry.recovery.PREDICTION_TOLERANCE_M"),
+        "max_prediction_error_deg": replaced_by_constant(
+            "odometry.recovery.PREDICTION_TOLERANCE_DEG"
+        ),
+        "min_sigma_xy_m": replaced_by_constant("odometry.registration.MIN_SIGMA_XY_M"),
+        "min_sigma_yaw_deg": replaced_by_constant("odometry.registration.MIN_SIGMA_YAW_DEG"),
+        "velocity_lag_fraction": replaced_by_constant("odometry.uncertainty.VELOCITY_LAG_FRACTION"),
+        "deskew_error_fraction": replaced_by_constant("odometry.uncertainty.DESKEW_ERROR_FRACTION"),
         "sigma_yaw_deg_per_deg": "removed: rotation terms in turns cost SLAM accuracy",
         "deskew_yaw_error_fraction": "removed: rotation terms in turns cost SLAM accuracy",
     }
@@ -108,8 +109,8 @@ class KeyframeConfig:
     """
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        "min_peak_quality": (
-            f"{CONSTANT}: twice quality.min_peak_quality (odometry.KEYFRAME_QUALITY_FACTOR)"
+        "min_peak_quality": replaced_by_constant(
+            "odometry.KEYFRAME_QUALITY_FACTOR, times quality.min_peak_quality"
         ),
     }
     max_translation_m: float = 10.0

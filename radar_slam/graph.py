@@ -49,6 +49,7 @@ from radar_slam.factors import (
 )
 from radar_slam.loops.records import LoopConstraint
 from raplace import between, checks, compose, wrap_angle
+from raplace.config_io import replaced_by_constant
 
 log = logging.getLogger(__name__)
 
@@ -112,7 +113,7 @@ _REPLACED_BY = {
     "gnc_inlier_probability": "graph.GNC_INLIER_PROBABILITY",
 }
 REMOVED_KEYS = {
-    key: f"now a constant of the method (radar_slam.{name})" for key, name in _REPLACED_BY.items()
+    key: replaced_by_constant(f"radar_slam.{name}") for key, name in _REPLACED_BY.items()
 }
 """Keys of the `graph` section that are gone, and what replaced them (`raplace.config_io`)."""
 

@@ -22,6 +22,18 @@ class ConfigReadError(RaPlaceError):
     """A settings mapping has an unknown key or a value of the wrong type."""
 
 
+def replaced_by_constant(where: str) -> str:
+    """The `REMOVED_KEYS` message of a key that became the named constant `where` (its dotted
+    name, maybe with a note)."""
+    return f"now a constant of the method ({where})"
+
+
+def replaced_by_constants(module: str, *keys: str) -> dict[str, str]:
+    """`REMOVED_KEYS` entries of keys that each became the upper-case constant of the same name
+    in `module` (a dotted module name)."""
+    return {key: replaced_by_constant(f"{module}.{key.upper()}") for key in keys}
+
+
 def from_dict(cls: type[T], data: dict[str, Any], where: str = "") -> T:
     """Build `cls` from a nested mapping on top of its defaults (see `merge`)."""
     return merge(cls, cls(), data, where or cls.__name__)

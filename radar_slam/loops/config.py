@@ -7,9 +7,8 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from raplace import RaPlaceConfig, checks
+from raplace.config_io import replaced_by_constant, replaced_by_constants
 
-CONSTANT = "now a constant of the method"
-"""Start of the message of a removed key (`raplace.config_io`) that became a named constant."""
 CHI2_3DOF_99 = 11.345
 """Chi-square quantile at 99 % for 3 degrees of freedom (x, y, yaw)."""
 
@@ -28,17 +27,15 @@ class VerificationConfig:
             ground truth to check the loops it adds.
     """
 
-    REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        name: f"{CONSTANT} (radar_slam.loops.verification.{name.upper()})"
-        for name in (
-            "min_sinogram_quality",
-            "min_inlier_fraction",
-            "max_disagreement_m",
-            "max_disagreement_deg",
-            "max_sigma_yaw_deg",
-            "yaw_rate_search",
-        )
-    }
+    REMOVED_KEYS: ClassVar[dict[str, str]] = replaced_by_constants(
+        "radar_slam.loops.verification",
+        "min_sinogram_quality",
+        "min_inlier_fraction",
+        "max_disagreement_m",
+        "max_disagreement_deg",
+        "max_sigma_yaw_deg",
+        "yaw_rate_search",
+    )
     max_translation_m: float = 15.0
     min_refined_quality: float = 12.0
 
@@ -110,17 +107,15 @@ class ConsistencyConfig:
             pass verification.
     """
 
-    REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        name: f"{CONSTANT} (radar_slam.loops.consistency.{name.upper()})"
-        for name in (
-            "window_m",
-            "chi2_threshold",
-            "drift_fraction",
-            "drift_deg_per_m",
-            "min_sigma_xy_m",
-            "min_sigma_yaw_deg",
-        )
-    }
+    REMOVED_KEYS: ClassVar[dict[str, str]] = replaced_by_constants(
+        "radar_slam.loops.consistency",
+        "window_m",
+        "chi2_threshold",
+        "drift_fraction",
+        "drift_deg_per_m",
+        "min_sigma_xy_m",
+        "min_sigma_yaw_deg",
+    )
     min_support: int = 1
 
     def __post_init__(self) -> None:  # value ranges
@@ -139,14 +134,16 @@ class ThrottleConfig:
     """
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        "closed_after": f"{CONSTANT} (radar_slam.loops.throttle.CLOSED_AFTER)",
-        "stretch_tolerance_m": f"{CONSTANT} (radar_slam.loops.throttle.STRETCH_TOLERANCE_M)",
-        "stretch_drift_fraction": (
-            f"{CONSTANT} (radar_slam.loops.throttle.STRETCH_DRIFT_FRACTION)"
+        "closed_after": replaced_by_constant("radar_slam.loops.throttle.CLOSED_AFTER"),
+        "stretch_tolerance_m": replaced_by_constant(
+            "radar_slam.loops.throttle.STRETCH_TOLERANCE_M"
         ),
-        "max_gap_m": f"{CONSTANT} (radar_slam.loops.throttle.MAX_GAP_M)",
-        "max_stretches": f"{CONSTANT} (radar_slam.loops.throttle.MAX_STRETCHES)",
-        "predicted_checks": f"{CONSTANT} (radar_slam.loops.detector.PREDICTED_CHECKS)",
+        "stretch_drift_fraction": (
+            replaced_by_constant("radar_slam.loops.throttle.STRETCH_DRIFT_FRACTION")
+        ),
+        "max_gap_m": replaced_by_constant("radar_slam.loops.throttle.MAX_GAP_M"),
+        "max_stretches": replaced_by_constant("radar_slam.loops.throttle.MAX_STRETCHES"),
+        "predicted_checks": replaced_by_constant("radar_slam.loops.detector.PREDICTED_CHECKS"),
     }
     closed_spacing_m: float = 20.0
 
@@ -178,13 +175,13 @@ of recent entries) and sinogram pose. RaPlace's own defaults (measured on MulRan
 decides. A map keeps the descriptor settings it was made with (`radar_slam.maps`)."""
 
 LOOP_CLOSURE_REMOVED_KEYS = {
-    "raplace": f"{CONSTANT} (radar_slam.loops.config.LOOP_RAPLACE, RaPlace's own defaults)",
+    "raplace": replaced_by_constant("radar_slam.loops.config.LOOP_RAPLACE, RaPlace's own defaults"),
     "refinement": (
         "the loop verifier's phase-correlation refinement now uses the odometry: section (whose "
         "defaults it had)"
     ),
-    "loops_per_query": f"{CONSTANT} (radar_slam.loops.detector.LOOPS_PER_QUERY)",
-    "covariance": f"{CONSTANT} (radar_slam.loops.verification.LOOP_COVARIANCE)",
+    "loops_per_query": replaced_by_constant("radar_slam.loops.detector.LOOPS_PER_QUERY"),
+    "covariance": replaced_by_constant("radar_slam.loops.verification.LOOP_COVARIANCE"),
     "scan_cache_mb": (
         "a run keeps no scans: it verifies a database scan from its record "
         "(radar_slam.maps.keyframes)"

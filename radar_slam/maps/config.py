@@ -6,9 +6,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from raplace import checks
-
-CONSTANT = "now a constant of the method"
-"""Start of the message of a removed key (`raplace.config_io`) that became a named constant."""
+from raplace.config_io import replaced_by_constant, replaced_by_constants
 
 
 @dataclass(frozen=True)
@@ -27,21 +25,19 @@ class LocalizerConfig:
             longer trusts the odometry for longer (a better odometry, a sparser map).
     """
 
-    REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        name: f"{CONSTANT} (radar_slam.maps.localizer.{name.upper()})"
-        for name in (
-            "relocalise_every_m",
-            "confirm_max_error_m",
-            "confirm_max_error_deg",
-            "search_radius_m",
-            "fix_keyframes",
-            "max_innovation_m",
-            "max_innovation_deg",
-            "window_fixes",
-            "map_sigma_xy_m",
-            "map_sigma_yaw_deg",
-        )
-    }
+    REMOVED_KEYS: ClassVar[dict[str, str]] = replaced_by_constants(
+        "radar_slam.maps.localizer",
+        "relocalise_every_m",
+        "confirm_max_error_m",
+        "confirm_max_error_deg",
+        "search_radius_m",
+        "fix_keyframes",
+        "max_innovation_m",
+        "max_innovation_deg",
+        "window_fixes",
+        "map_sigma_xy_m",
+        "map_sigma_yaw_deg",
+    )
     candidates: int = 3
     max_descriptor_distance: float = 0.25
     fix_every_m: float = 10.0
@@ -65,7 +61,9 @@ class MapsConfig:
     """
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        "image": f"{CONSTANT} (radar_slam.maps.images.KEYFRAME_IMAGE; a map records its own)",
+        "image": replaced_by_constant(
+            "radar_slam.maps.images.KEYFRAME_IMAGE; a map records its own"
+        ),
     }
     keyframe_spacing_m: float = 4.0
     localization: LocalizerConfig = field(default_factory=LocalizerConfig)

@@ -1,10 +1,11 @@
-"""The odometry against the simulator: known answers and drift on a short sequence.
+"""The odometry against the simulator: known answers, and covariances on a short sequence.
 
 Known answer: the `tiny` town (1024 bins, 61 m) rendered from a pose and again after a known
 motion, once without motion distortion (every azimuth seen from one pose, scans without azimuth
 times) and once with it (each azimuth seen from the pose at its own time under a constant
-velocity, which `estimate_motion` has to estimate and undo). Drift: the first scans of `loop`
-(full MulRan geometry), KITTI-style, and the normalised errors of the per-scan covariances.
+velocity, which `estimate_motion` has to estimate and undo). Covariances: the normalised errors
+of the per-scan covariances over the first scans of `loop` (full MulRan geometry); the drift of
+the simulated drives is a benchmark (docs/benchmarks.md), not a test bar.
 """
 
 from __future__ import annotations
@@ -19,12 +20,10 @@ from odometry import OdometryConfig, estimate_motion
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry
 from radar_slam.datasets.frame import RadarFrame
-from radar_slam.evaluation.metrics import kitti_drift
 from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import Scene, build_scene, generate_sequence, make_renderer
 from radar_slam.sim.render import RenderTables, render_scan
 from radar_slam.sim.scenarios import get_scenario
-from radar_slam.trajectory import Trajectory
 from raplace import se2
 from raplace.units import NS_PER_S
 
@@ -38,11 +37,7 @@ KNOWN_MOTIONS = (
     (1.6, -0.2, -2.0),
     (3.2, 0.1, 7.5),  # 30 deg/s: de-skewing matters
 )
-DRIFT_FRAMES = 120  # ~270 m of `loop`
-MAX_DRIFT_PCT = 1.0
-MAX_DRIFT_DEG_PER_100M = 1.0
-"""KITTI drift bars [%, deg/100 m]; without de-skew or without the rotation refinement the
-drift is several times higher."""
+LOOP_FRAMES = 120  # ~270 m of `loop`
 NEES_RANGE = (0.5, 6.0)
 """Mean normalised squared error of the scan-to-reference motions (3 when calibrated; 25-35
 with the covariances of a de-skew that is off or referred to the end of the sweep). The peak
@@ -146,26 +141,19 @@ def test_deskew_sign_matters(tiny_scene: tuple[Scene, RenderTables]) -> None:
 @pytest.fixture(scope="module")
 def loop_start(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("sim") / "loop"
-    generate_sequence(get_scenario("loop"), folder, frames=DRIFT_FRAMES)
+    generate_sequence(get_scenario("loop"), folder, frames=LOOP_FRAMES)
     return folder
 
 
-def test_drift_and_covariances_on_the_start_of_loop(loop_start: Path) -> None:
+def test_covariances_on_the_start_of_loop_are_consistent(loop_start: Path) -> None:
+    """Each scan's pose relative to its reference scan against the truth, normalised by the
+    reported covariance (turned back from the previous scan's axes into the reference's)."""
     sequence = open_synthetic(loop_start)
     ground_truth = sequence.ground_truth
     assert ground_truth is not None
     odometry = Odometry()
     results = [odometry.register(sequence[k]) for k in range(len(sequence))]
     assert odometry.gaps == []
-
-    stamps = sequence.timestamps_ns
-    drift = kitti_drift(Trajectory(stamps, odometry.poses), Trajectory(stamps, ground_truth))
-    assert drift is not None and drift.segments > 0
-    assert drift.trans_pct <= MAX_DRIFT_PCT, drift
-    assert drift.rot_deg_per_100m <= MAX_DRIFT_DEG_PER_100M, drift
-
-    # Each scan's pose relative to its reference scan against the truth, normalised by the
-    # reported covariance (turned back from the previous scan's axes into the reference's).
     nees = []
     for r in results[1:]:
         error = r.keyframe_motion - se2.between(

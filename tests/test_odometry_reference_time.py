@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from odometry import Odometry, OdometryResult
-from odometry.deskew import motion_from_twist
 from odometry.velocity import Velocity, interpolated_twist, pose_at_reference
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
@@ -53,11 +52,17 @@ def test_interpolated_twist_is_linear_between_the_measurements() -> None:
 
 
 def test_pose_at_reference_follows_the_arc() -> None:
-    """An image 0.125 s before the reference time, on a 10 m/s, 40 deg/s arc."""
+    """An image 0.125 s before the reference time, on a 10 m/s, 40 deg/s arc: a circle of
+    radius 10 / (40 deg/s) = 14.32 m turned through 5 deg, so the sensor moves along the chord,
+    R sin 5 deg = 1.2484 m ahead and R (1 - cos 5 deg) = 0.0545 m to the left of the image's
+    heading; backwards in time it retraces the same arc."""
     twist = np.array([10.0, 0.0, np.deg2rad(40.0)])
     image_pose = np.array([5.0, -2.0, 0.3])
     pose = pose_at_reference(image_pose, twist, -0.125)
+    ahead, left = 1.2484, 0.0545
+    c, s = np.cos(0.3), np.sin(0.3)
     np.testing.assert_allclose(
-        pose, se2.compose(image_pose, motion_from_twist(twist, 0.125)), atol=1e-12
+        pose[:2], [5.0 + c * ahead - s * left, -2.0 + s * ahead + c * left], atol=1e-4
     )
     assert np.rad2deg(pose[2] - image_pose[2]) == pytest.approx(5.0)
+    np.testing.assert_allclose(pose_at_reference(pose, twist, 0.125), image_pose, atol=1e-12)

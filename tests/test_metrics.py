@@ -126,8 +126,9 @@ def test_straight_line_with_one_percent_scale_error() -> None:
     assert drift is not None
     assert drift.trans_pct == pytest.approx(1.0, abs=1e-9)
     assert drift.rot_deg_per_100m == pytest.approx(0.0, abs=1e-12)
-    # segments: length L fits from every start s (step 10) with s + L <= 900
-    assert drift.segments == sum(len(range(0, 901 - length, 10)) for length in range(100, 801, 100))
+    # segments: length L fits from the starts 0, 10, ..., 900 - L: 81 of 100 m, 71 of 200 m, ...,
+    # 11 of 800 m
+    assert drift.segments == 81 + 71 + 61 + 51 + 41 + 31 + 21 + 11
 
 
 def test_constant_yaw_rate_drift_by_hand() -> None:

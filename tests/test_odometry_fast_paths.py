@@ -19,7 +19,6 @@ from test_odometry_units import FakeScan, clockwise_azimuths
 from odometry.config import OdometryConfig, PreprocessConfig
 from odometry.deskew import sampling_maps
 from odometry.phase_correlation import (
-    PEAK_EXCLUSION_SIGMAS,
     SPECTRUM_EPS,
     correlate,
     forward,
@@ -232,38 +231,67 @@ def test_summed_angular_correlation_equals_numpy_reference(n: int) -> None:
     assert int(np.argmax(curve)) == 7
 
 
-def test_peak_statistics_equal_numpy_formulas() -> None:
-    ref, moved = _shifted_pair(128, seed=8)
-    surface = correlate(forward(ref), forward(moved), ref.shape, 1.0)
-    h, w = surface.shape
-    rng = np.random.default_rng(9)
-    exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * 1.0)) + 1
-    for centre in [None, (3.2, -7.9), (-63.0, 62.6), *rng.uniform(-64, 64, (5, 2))]:
-        peak = locate_peak(surface, 1.0, None if centre is None else tuple(centre), 6.0)
-        i0, j0 = (int(round(v)) % n for v, n in zip(peak.shift_px, (h, w), strict=True))
-        if centre is None:
-            assert surface[i0, j0] == surface.max()
-        else:  # the window's maximum (np.argmax order on ties)
-            rows = (int(round(centre[0])) + np.arange(-6, 7)) % h
-            cols = (int(round(centre[1])) + np.arange(-6, 7)) % w
-            window = surface[np.ix_(rows, cols)]
-            a, b = divmod(int(np.argmax(window)), window.shape[1])
-            i0, j0 = int(rows[a]), int(cols[b])
-        height = float(surface[i0, j0])
-        keep = np.ones(h, dtype=bool)
-        keep[(i0 + np.arange(-exclude, exclude + 1)) % h] = False
-        assert peak.quality == pytest.approx(height / float(np.std(surface[keep])), rel=1e-5)
-        patch = surface[np.ix_((i0 + np.arange(-1, 2)) % h, (j0 + np.arange(-1, 2)) % w)]
-        logp = np.log(np.maximum(patch.astype(np.float64), max(height, 1e-30) * 1e-3))
-        hyy = logp[2, 1] - 2.0 * logp[1, 1] + logp[0, 1]
-        hxx = logp[1, 2] - 2.0 * logp[1, 1] + logp[1, 0]
-        hxy = 0.25 * (logp[2, 2] - logp[2, 0] - logp[0, 2] + logp[0, 0])
-        np.testing.assert_allclose(peak.curvature, -np.array([[hyy, hxy], [hxy, hxx]]), atol=1e-9)
-        grad = 0.5 * np.array([logp[2, 1] - logp[0, 1], logp[1, 2] - logp[1, 0]])
-        if np.linalg.eigvalsh(peak.curvature).min() > 1e-6:
-            offset = np.clip(np.linalg.solve(peak.curvature, grad), -1.0, 1.0)
-            wrapped = (np.array([i0, j0]) + offset + [h / 2, w / 2]) % [h, w] - [h / 2, w / 2]
-            np.testing.assert_allclose(peak.shift_px, wrapped, atol=1e-9)
+PEAK_PRECISION = np.linalg.inv(np.array([[1.69, 0.4], [0.4, 1.0]]))
+"""Inverse covariance [1/px^2] of the Gaussian peaks below (1.3 px along rows, 1 px along columns,
+correlated)."""
+BACKGROUND = 0.01
+"""Amplitude of the +-checkerboard around them: its standard deviation."""
+
+
+def _gaussian_peak_surface(
+    centres: list[tuple[float, float]], heights: list[float], size: int = 64
+) -> np.ndarray:
+    """A periodic (size, size) float32 surface: Gaussian peaks (`PEAK_PRECISION`) at the
+    sub-pixel `centres` (rows, cols) in the rows within 5 of each centre (the peak's noise band),
+    a checkerboard of +-`BACKGROUND` (mean 0, standard deviation `BACKGROUND`) elsewhere."""
+    i, j = np.mgrid[0:size, 0:size].astype(np.float64)
+    surface = BACKGROUND * (1.0 - 2.0 * ((i + j) % 2))
+    for (ci, cj), height in zip(centres, heights, strict=True):
+        di = (i - ci + size / 2) % size - size / 2
+        dj = (j - cj + size / 2) % size - size / 2
+        a, b, c = PEAK_PRECISION[0, 0], PEAK_PRECISION[0, 1], PEAK_PRECISION[1, 1]
+        band = np.abs(di) <= 5.0
+        peak = height * np.exp(-0.5 * (a * di * di + 2 * b * di * dj + c * dj * dj))
+        surface[band] = peak[band]
+    return surface.astype(np.float32)
+
+
+@pytest.mark.parametrize(
+    ("centre", "wrapped"),
+    [((20.3, 40.6), (20.3, -23.4)), ((63.7, 0.2), (-0.3, 0.2)), ((5.45, 31.9), (5.45, 31.9))],
+)
+def test_a_gaussian_peak_is_located_and_its_width_measured(
+    centre: tuple[float, float], wrapped: tuple[float, float]
+) -> None:
+    """The log of a Gaussian is a quadratic, so the fit is exact: the sub-pixel centre (as a
+    shift in [-size/2, size/2)), the curvature its inverse covariance, the quality the height at
+    the top pixel over the background's standard deviation, the covariance the Gaussian's
+    divided by the squared quality."""
+    surface = _gaussian_peak_surface([centre], [1.0])
+    peak = locate_peak(surface, 1.0)
+    np.testing.assert_allclose(peak.shift_px, wrapped, atol=1e-4)
+    np.testing.assert_allclose(peak.curvature, PEAK_PRECISION, atol=1e-4)
+    top = np.round(centre) - np.array(centre)
+    height = np.exp(-0.5 * top @ PEAK_PRECISION @ top)
+    assert peak.quality == pytest.approx(height / BACKGROUND, rel=1e-4)
+    covariance = np.linalg.inv(PEAK_PRECISION) / peak.quality**2
+    np.testing.assert_allclose(peak.covariance_px(), covariance, rtol=1e-3)
+    # A saddle instead of a peak: 10 px either way, not a covariance from the fit.
+    flat = dataclasses.replace(peak, curvature=np.array([[1.0, 0.0], [0.0, -1.0]]))
+    np.testing.assert_allclose(flat.covariance_px(), np.eye(2) * 1e2 / peak.quality**2)
+
+
+def test_a_search_window_finds_the_weaker_peak_inside_it() -> None:
+    """Two peaks, the stronger outside the window: the window's own peak is located, also when
+    the window wraps round the surface's edges."""
+    for weak, strong in (((10.2, -20.4 % 64), (40.0, 30.0)), ((63.6, 63.3), (30.0, 30.0))):
+        surface = _gaussian_peak_surface([weak, strong], [0.5, 1.0])
+        assert locate_peak(surface, 1.0).shift_px == pytest.approx(
+            (np.array(strong) + 32) % 64 - 32, abs=1e-4
+        )
+        near = (weak[0] + 2.0, weak[1] - 3.0)
+        found = locate_peak(surface, 1.0, near, 6.0).shift_px
+        np.testing.assert_allclose(found, (np.array(weak) + 32) % 64 - 32, atol=1e-4)
 
 
 def test_centred_log_magnitude_equals_numpy() -> None:
@@ -292,33 +320,20 @@ def test_packed_spectra_hold_the_numpy_half_spectra(shape: tuple[int, int]) -> N
     assert _relative_error(forward_rows(image), expected) < 1e-6
 
 
-def test_angular_peak_statistics_equal_numpy_formulas() -> None:
-    rng = np.random.default_rng(13)
-    curve = np.roll(np.exp(-0.5 * (np.arange(360) - 180.0) ** 2 / 1.5**2), 97)
-    curve = curve + rng.normal(0, 0.01, 360)
-    step = np.pi / 360
-    estimate = _rotation_of_peak(curve, 1.0, step)
-    i0 = int(np.argmax(curve))
-    exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * 1.0)) + 1
-    keep = np.ones(360, dtype=bool)
-    keep[(i0 + np.arange(-exclude, exclude + 1)) % 360] = False
-    quality = curve[i0] / np.std(curve[keep])
-    assert estimate.quality == pytest.approx(quality, rel=1e-9)
-    logt = np.log(curve[(i0 + np.arange(-1, 2)) % 360])
-    second = logt[0] - 2.0 * logt[1] + logt[2]
-    shift = (i0 + 0.5 * (logt[0] - logt[2]) / second + 180.0) % 360 - 180.0
-    assert estimate.angle_rad == pytest.approx(-shift * step, abs=1e-12)
-    assert estimate.sigma_rad == pytest.approx(np.sqrt(-1.0 / second) / quality * step, rel=1e-9)
-    assert abs(shift - (277 - 360)) < 0.1  # the true peak, wrapped to [-180, 180)
-
-
-def test_peak_covariance_closed_form_equals_linalg() -> None:
-    ref, moved = _shifted_pair(64, seed=21)
-    peak = locate_peak(correlate(forward(ref), forward(moved), ref.shape, 1.0), 1.0)
-    assert np.linalg.eigvalsh(peak.curvature).min() > 1e-6
-    expected = np.linalg.inv(peak.curvature) / max(peak.quality, 1.0) ** 2
-    np.testing.assert_allclose(peak.covariance_px(), expected, rtol=1e-12)
-    flat = dataclasses.replace(peak, curvature=np.array([[1.0, 0.0], [0.0, -1.0]]))
-    np.testing.assert_array_equal(
-        flat.covariance_px(), np.eye(2) * 1e2 / max(peak.quality, 1.0) ** 2
+def test_an_angular_gaussian_peak_gives_its_rotation_and_width() -> None:
+    """A Gaussian of 1.5 samples at sample 277.3 of 360 (0.5 deg apart) over a +-0.01 alternating
+    background: the rotation is minus the wrapped shift (82.7 samples, 41.35 deg), the quality
+    the height over the background, the standard deviation the width over the quality."""
+    step = np.deg2rad(0.5)
+    samples = np.arange(360)
+    distance = (samples - 277.3 + 180.0) % 360 - 180.0
+    curve = np.where(
+        np.abs(distance) <= 5.0,
+        np.exp(-0.5 * (distance / 1.5) ** 2),
+        BACKGROUND * (1.0 - 2.0 * (samples % 2)),
     )
+    estimate = _rotation_of_peak(curve, 1.0, step)
+    assert np.rad2deg(estimate.angle_rad) == pytest.approx(41.35, abs=1e-9)
+    height = np.exp(-0.5 * (0.3 / 1.5) ** 2)
+    assert estimate.quality == pytest.approx(height / BACKGROUND, rel=1e-4)
+    assert estimate.sigma_rad == pytest.approx(1.5 * step / estimate.quality, rel=1e-9)

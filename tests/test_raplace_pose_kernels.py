@@ -1,4 +1,5 @@
-"""The compiled kernels of the sinogram pose agree with their plain numpy formulations."""
+"""The compiled kernels of the sinogram pose: against their plain numpy formulations, and known
+answers."""
 
 from __future__ import annotations
 
@@ -62,21 +63,35 @@ def test_fit_translation_matches_least_squares_on_the_inliers() -> None:
     assert truncated == pytest.approx(np.sqrt(np.mean(np.minimum(residual**2, 1.0))), rel=1e-12)
 
 
-def test_aligned_correlation_matches_its_numpy_formula() -> None:
+def test_aligned_correlation_is_one_at_the_true_translation_and_near_zero_elsewhere() -> None:
+    """Rows moved by their own translation correlate perfectly, whatever their scale; unrelated
+    rows and the right rows at a translation 2 m off hardly correlate."""
     rng = np.random.default_rng(3)
     thetas = pose_angles(N_THETA)
     freqs = np.arange(SIDE + 1) * 0.01
     q, m = random_rows(rng), random_rows(rng)
     xy = np.array([1.5, -0.5])
     shift = (xy[0] * np.cos(thetas) + xy[1] * np.sin(thetas))[:, None]
-    phase = np.exp(2j * np.pi * freqs[None, 1:] * shift)
-    weight = freqs[None, 1:]
-    num = np.sum(weight * (q[:, 1:] * np.conj(m[:, 1:]) * phase).real)
-    den = np.sqrt(np.sum(weight * np.abs(q[:, 1:]) ** 2) * np.sum(weight * np.abs(m[:, 1:]) ** 2))
-    assert aligned_correlation(q, m, thetas, freqs, xy) == pytest.approx(num / den, abs=1e-6)
-    # The same rows moved by their own shift correlate perfectly.
     moved = (m * np.exp(-2j * np.pi * freqs[None, :] * shift)).astype(np.complex64)
-    assert aligned_correlation(moved, m, thetas, freqs, xy) > 0.9999
+    assert aligned_correlation(moved, m, thetas, freqs, xy) == pytest.approx(1.0, abs=1e-5)
+    assert aligned_correlation(3 * moved, m, thetas, freqs, xy) == pytest.approx(1.0, abs=1e-5)
+    assert abs(aligned_correlation(q, m, thetas, freqs, xy)) < 0.05
+    off = xy + np.array([2.0, 0.0])
+    assert abs(aligned_correlation(moved, m, thetas, freqs, off)) < 0.2
+
+
+def test_aligned_correlation_weighs_each_frequency_by_its_ring() -> None:
+    """Polar Parseval: the ring at frequency k covers an area proportional to k. Rows of unit
+    magnitude against the same rows cut to their lower half (k = 1..32 of 64, DC excluded)
+    correlate sqrt(528 / 2080) = 0.504 (0.707 were every frequency weighed alike)."""
+    rng = np.random.default_rng(5)
+    thetas = pose_angles(N_THETA)
+    freqs = np.arange(SIDE + 1) * 0.01
+    rows = np.exp(2j * np.pi * rng.random((N_THETA, SIDE + 1))).astype(np.complex64)
+    low = rows.copy()
+    low[:, SIDE // 2 + 1 :] = 0.0
+    correlation = aligned_correlation(low, rows, thetas, freqs, np.zeros(2))
+    assert correlation == pytest.approx(np.sqrt(528 / 2080), abs=1e-5)
 
 
 def test_image_spectrum_equals_the_shifted_padded_fft2() -> None:

@@ -3,8 +3,9 @@
 Bit for bit: the uint16 bin sums and the counting ring median against OpenCV's area resize and a
 partition, the per-scan caches (wrapped polar image, refinement spectrum) against fresh
 computations. To float32 precision (compiled float32 kernels against float64 numpy): the
-sampling maps, the cross-power spectra of the 2-D and 1-D phase correlations, the peak
-statistics, the packed spectra and the Fourier-Mellin log magnitude.
+sampling maps, the cross-power spectra of the 2-D and 1-D phase correlations, the packed spectra
+and the Fourier-Mellin log magnitude. The peak statistics against known answers: Gaussian peaks,
+whose log the fit describes exactly.
 """
 
 from __future__ import annotations

@@ -59,8 +59,14 @@ def test_fit_translation_matches_least_squares_on_the_inliers() -> None:
     design = np.stack([np.cos(thetas), np.sin(thetas)], axis=1)
     expected = np.linalg.lstsq(design[inliers], shifts[inliers], rcond=None)[0]
     np.testing.assert_allclose(got, expected, atol=1e-9)
-    residual = shifts - design @ got
-    assert truncated == pytest.approx(np.sqrt(np.mean(np.minimum(residual**2, 1.0))), rel=1e-12)
+    # Without noise: the translation exactly, and a truncated RMS of the 6 outliers of 32 each
+    # counted at the 1 m bound, sqrt(6 / 32).
+    exact = xy[0] * np.cos(thetas) + xy[1] * np.sin(thetas)
+    exact[outliers] += rng.uniform(4.0, 8.0, 6)
+    got, truncated, inliers = fit_translation(thetas, exact, threshold_m=1.0)
+    np.testing.assert_allclose(got, xy, atol=1e-9)
+    assert truncated == pytest.approx(np.sqrt(6 / 32), rel=1e-9)
+    assert not inliers[outliers].any() and inliers.sum() == N_THETA - 6
 
 
 def test_aligned_correlation_is_one_at_the_true_translation_and_near_zero_elsewhere() -> None:

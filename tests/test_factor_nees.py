@@ -74,24 +74,24 @@ def test_loop_covariance_grows_with_the_twist_change_of_both_scans() -> None:
     """A yaw-rate step of 30 deg/s across a 250 ms sweep bends it by about 3.75 deg over half
     the sweep; the term adds that fraction as a standard deviation per scan, and nothing for
     scans whose twist did not change."""
-    half_sweep_s = 0.5 * 0.25 * 399 / 400
     step = (1.0, 0.0, np.deg2rad(30.0))
     variance = deskew_variance(_scan(step), _scan(None))
-    np.testing.assert_allclose(
-        variance, [half_sweep_s**2, half_sweep_s**2, (half_sweep_s * step[2]) ** 2]
-    )
+    # Half of a 399/400 x 250 ms sweep is 0.1247 s: 0.1247 m per 1 m/s, 3.74 deg at 30 deg/s.
+    bend = np.array([0.1246875, 0.1246875, np.deg2rad(3.740625)])
+    np.testing.assert_allclose(np.sqrt(variance), bend, rtol=1e-9)
     np.testing.assert_allclose(deskew_variance(_scan(step), _scan(step)), 2 * variance)
     cfg = LoopCovarianceConfig(deskew_error_fraction=0.5, swept_turn_fraction=0.1)
     peak = np.diag([1e-4, 1e-4, 1e-6])
     plain = loop_covariance(peak, np.zeros(3), 0.0, cfg)
     bent = loop_covariance(peak, np.zeros(3), 0.0, cfg, variance)
-    np.testing.assert_allclose(np.diag(bent - plain), 0.25 * variance)
+    np.testing.assert_allclose(np.sqrt(np.diag(bent - plain)), 0.5 * bend, rtol=1e-9)
     turning = _scan(None)
     turning = KeyScan(0, turning.timestamp_ns, turning.scan, np.array([5.0, 0.0, 0.5]))
     turn = swept_turn_variance(turning, _scan(None))
-    assert turn == pytest.approx((half_sweep_s * 0.5) ** 2)
+    assert np.sqrt(turn) == pytest.approx(0.06234375, rel=1e-9)  # 0.5 rad/s over 0.1247 s
     swept = loop_covariance(peak, np.zeros(3), 0.0, cfg, turn_variance=turn)
-    np.testing.assert_allclose(np.diag(swept - plain), [0.0, 0.0, 0.01 * turn], atol=1e-18)
+    added = np.sqrt(np.diag(swept - plain))
+    np.testing.assert_allclose(added, [0.0, 0.0, 0.006234375], rtol=1e-9, atol=1e-12)
 
 
 @pytest.fixture(scope="module")

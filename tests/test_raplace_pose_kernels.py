@@ -74,7 +74,7 @@ def test_aligned_correlation_is_one_at_the_true_translation_and_near_zero_elsewh
     rows and the right rows at a translation 2 m off hardly correlate."""
     rng = np.random.default_rng(3)
     thetas = pose_angles(N_THETA)
-    freqs = np.arange(SIDE + 1) * 0.01
+    freqs = np.arange(SIDE + 1, dtype=np.float64) * 0.01
     q, m = random_rows(rng), random_rows(rng)
     xy = np.array([1.5, -0.5])
     shift = (xy[0] * np.cos(thetas) + xy[1] * np.sin(thetas))[:, None]
@@ -92,7 +92,7 @@ def test_aligned_correlation_weighs_each_frequency_by_its_ring() -> None:
     correlate sqrt(528 / 2080) = 0.504 (0.707 were every frequency weighed alike)."""
     rng = np.random.default_rng(5)
     thetas = pose_angles(N_THETA)
-    freqs = np.arange(SIDE + 1) * 0.01
+    freqs = np.arange(SIDE + 1, dtype=np.float64) * 0.01
     rows = np.exp(2j * np.pi * rng.random((N_THETA, SIDE + 1))).astype(np.complex64)
     low = rows.copy()
     low[:, SIDE // 2 + 1 :] = 0.0

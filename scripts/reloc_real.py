@@ -21,7 +21,8 @@ Each localised position is taken into the GNSS frame through the map's own align
 queries; GNSS is read through the clock offset estimated from the odometry (`pr_real`). Queries
 in GNSS outages are left out. Printed per variant: of the queries within 10 m of the map's
 route (its keyframes' GNSS positions), the share placed within 5 m of GNSS and the share lost;
-of all queries, the number placed more than 10 m off; the median yaw error (against the GNSS
+of all queries, the number placed more than 10 m off and the number placed while more than
+10 m from the route (extrapolated past the map); the median yaw error (against the GNSS
 heading, less the expected pi when turned); relocalisations; and how well the
 CSV's `quality` and `sigma_m` columns separate good from bad placements (the loosest threshold
 that keeps only scans within 5 m, and how many scans it keeps).
@@ -83,13 +84,16 @@ class Turned(ScanSelection):
 @dataclass(frozen=True)
 class Variant:
     """One way of localising the queries: the scans, the map, how often the localizer starts
-    afresh, and the yaw expected of a correct placement relative to GNSS [rad]."""
+    afresh, the yaw expected of a correct placement relative to GNSS [rad], and the map whose
+    keyframes trace the route (the map itself unless given: a sparse map covers the streets
+    of the full one)."""
 
     name: str
     queries: RadarSequence
     map: Map
     restart_every: int | None = None
     expected_yaw: float = 0.0
+    route: Map | None = None
 
 
 @dataclass(frozen=True)
@@ -161,7 +165,7 @@ def localize(variant: Variant, gnss: FloatArray, config: PipelineConfig) -> Scor
             placed = compose(m.gt_alignment, f.pose)
             error[n] = float(np.hypot(*(placed[:2] - gnss[n, :2])))
             yaw_error[n] = float(wrap_angle(placed[2] - gnss[n, 2] - variant.expected_yaw))
-    route = map_route_gt(m)
+    route = map_route_gt(m if variant.route is None else variant.route)
     has_gnss = np.isfinite(gnss[:, 0])
     distance = np.full(len(gnss), np.inf)
     for k in np.flatnonzero(has_gnss):
@@ -214,6 +218,7 @@ def row(s: Scored) -> list[str]:
         f"{100 * good.sum() / n:.1f} %",
         f"{100 * (near & ~localised).sum() / n:.1f} %",
         f"{int(wrong.sum())} (max {largest:.1f} m)",
+        str(int((localised & ~near).sum())),
         f"{median:.2f} m / {np.rad2deg(yaw):.1f} deg",
         f"{s.relocalisations} of {s.global_attempts}",
         separation(quality, is_good, higher_is_better=True),
@@ -228,6 +233,7 @@ HEADER = [
     "within 5 m of GNSS",
     "lost",
     "more than 10 m off",
+    "placed off the route",
     "median error: position / yaw",
     "relocalisations (of attempts)",
     "quality keeping only scans within 5 m",
@@ -252,6 +258,7 @@ def variants(sequence: RadarSequence, m: Map, stride: int) -> tuple[list[Variant
             f"sparse map (1 keyframe in {SPARSE_EVERY})",
             queries,
             keyframe_subset(m, np.arange(len(m)) % SPARSE_EVERY == 0),
+            route=m,
         ),
     ], picks
 
@@ -272,8 +279,8 @@ def run(root: Path, stride: int) -> str:
         f"the keyframes of scans {GAP_SCANS[0]}-{GAP_SCANS[1] - 1}. GNSS read through a clock "
         f"offset of {offset_s:+.2f} s; queries in GNSS outages left out; positions through the "
         f"map's own GNSS alignment; 'near the route': within {NEAR_ROUTE_M:.0f} m of a map "
-        "keyframe. The quality and sigma_m columns: the loosest threshold that keeps only "
-        "scans within 5 m, and how many it keeps."
+        "keyframe (of the full map for the sparse one). The quality and sigma_m columns: the "
+        "loosest threshold that keeps only scans within 5 m, and how many it keeps."
     )
     return head + "\n\n" + markdown_table(HEADER, rows)
 

@@ -17,6 +17,7 @@ from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.loops import GeometricVerifier, KeyScan, LoopClosureConfig
 from radar_slam.maps import ImageGeometry, KeyframeImager, Map, MapError, build_map
+from radar_slam.maps.boreas import BOREAS_FILE, read_boreas
 from radar_slam.maps.build import select_keyframes
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import DATA_FILES, MANIFEST_FILE, encode_map
@@ -214,6 +215,13 @@ def test_localize_command(
     lost = [r for r in rows if r["status"] == "lost"]
     assert all(r["sigma_m"] == r["cov_xx"] == r["x"] == "" for r in lost)
     assert len(read_tum(out / "localization.tum")) == len(localised)
+    boreas = read_boreas(out / BOREAS_FILE)  # the same poses, in the benchmark's form
+    np.testing.assert_allclose(
+        boreas.relative,
+        [[float(r[k]) for k in ("rel_x", "rel_y", "rel_yaw")] for r in localised],
+        atol=1e-9,
+    )
+    assert boreas.information is not None and boreas.information.shape == (len(localised), 6, 6)
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["wrong_localised"] == 0 and metrics["scans"] == 40
     assert (out / "localization.png").is_file()

@@ -22,10 +22,11 @@
   scans of the latest `WINDOW_FIXES` fixes joined by the odometry between them, each fix a loop
   factor (robust kernel) to its keyframe, the keyframes held by tight priors at their map poses.
   The fused pose of the newest scan is the new anchor of the prediction.
-- **lost.** Once `FAILED_FIXES_LOST` tracking fixes in a row have failed, the registration to
-  the map has weakened: the scans are reported lost (the odometry still carries the prediction,
-  and a fix that agrees with it resumes tracking). After `lost_after_m` of travel without an
-  accepted fix, tracking has lost the map: back to global relocalisation.
+- **lost.** A failed tracking fix is tried again at the next scan; once `FAILED_FIXES_LOST` in
+  a row have failed, the registration to the map has weakened: the scans are reported lost (the
+  odometry still carries the prediction, and a fix that agrees with it resumes tracking).
+  After `lost_after_m` of travel without an accepted fix, tracking has lost the map: back to
+  global relocalisation.
 
 Each localised scan comes with the covariance of its pose (`Localization.covariance`): the
 latest fix's registration and map keyframe uncertainty, carried forward through the odometry's
@@ -129,7 +130,9 @@ MAP_SIGMA_YAW_DEG = 0.1
 FAILED_FIXES_LOST = 2
 """Tracking fix attempts failing in a row after which the scans are reported lost: one can fail
 on a passing truck; two in a row mean the map no longer supports the pose, which is then only
-the odometry's extrapolation."""
+the odometry's extrapolation. After a failed attempt the next scan tries again (not
+`fix_every_m` later), so a track that leaves the map is reported lost one scan after its first
+failed fix rather than a fix spacing later."""
 
 
 @dataclass(frozen=True)
@@ -438,7 +441,7 @@ class Localizer:
     # -- tracking -----------------------------------------------------------------------------
     def _track(self, query: KeyScan) -> Status:
         cfg, state = self.cfg, self.state
-        if state.path_since_attempt_m >= cfg.fix_every_m:
+        if state.path_since_attempt_m >= cfg.fix_every_m or state.failed_fixes:
             state.path_since_attempt_m = 0.0
             predicted = compose(state.anchor, state.since)
             near = self.keyframes.near(predicted, SEARCH_RADIUS_M, FIX_KEYFRAMES)

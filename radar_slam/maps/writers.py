@@ -5,6 +5,8 @@ A localisation result folder holds:
     config.yaml        the settings used
     localization.tum   the pose in the map frame of every localised scan (TUM)
     localization.csv   one row per scan (LOCALIZATION_CSV_COLUMNS)
+    localization_boreas.txt  the localised scans in the Boreas localisation benchmark's form
+                       (`radar_slam.maps.boreas`)
     metrics.json       `LocalizationMetrics` (when the sequence and the map have GT)
     summary.txt        a short human summary
     localization.png   the map's keyframes with the localised trajectory, lost scans marked
@@ -25,6 +27,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from radar_slam.maps.boreas import BOREAS_FILE, write_boreas
 from radar_slam.maps.evaluate import LocalizationMetrics
 from radar_slam.maps.format import Map, map_bytes
 from radar_slam.maps.localizer import Localization
@@ -179,9 +182,11 @@ def write_localization(
     seconds: float,
     metrics: LocalizationMetrics | None,
 ) -> None:
-    """localization.tum/.csv/.png, summary.txt and (with metrics) metrics.json into `folder`."""
+    """localization.tum/.csv/.png, localization_boreas.txt, summary.txt and (with metrics)
+    metrics.json into `folder`."""
     write_tum(folder / TUM_FILE, localized_trajectory(fixes))
     write_localization_csv(folder / CSV_FILE, fixes)
+    write_boreas(folder / BOREAS_FILE, fixes, m.keyframes["timestamp_ns"])
     if metrics is not None:
         write_json(folder / "metrics.json", metrics.to_dict())
     (folder / "summary.txt").write_text(localization_summary(sequence, fixes, seconds, metrics))

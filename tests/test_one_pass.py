@@ -1,7 +1,7 @@
 """One pass per scan: a SLAM run decodes each scan once, conditions it once and describes it
-once; the loop verifier takes a database scan back from its record, `radar-slam run` reads its
-config files and opens its sequence once, and what a run keeps per scan, on a 10,000-scan drive,
-stays within the memory budget (`GROWTH_BUDGET_BYTES`)."""
+once; the loop verifier takes a database scan back from its record, and what a run keeps per
+scan, on a 10,000-scan drive, stays within the memory budget (`GROWTH_BUDGET_BYTES`). (Config
+files and openings of the sequence per command: tests/test_one_pass_open.py.)"""
 
 from __future__ import annotations
 
@@ -12,14 +12,12 @@ from collections import Counter
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from unittest import mock
 
 import numpy as np
 import pytest
 
 from odometry import preprocess_polar
-from radar_slam.cli import main
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.maps.images import PSEUDO_SENSOR
 from radar_slam.maps.keyframes import KeyframeRecorder
@@ -167,29 +165,6 @@ def test_each_scan_is_described_once(counted_run: CountedRun) -> None:
     taken = pipeline.keyframes.descriptors_taken  # type: ignore[attr-defined]
     assert taken == len(recorded.records)
     assert max(counts.pose_images.values()) == 1
-
-
-def test_radar_slam_run_opens_and_configures_once(
-    tiny_loop: RadarSequence, synthetic_root: Path, tmp_path: Path
-) -> None:
-    from radar_slam.pipeline import config as pipeline_config
-
-    frames = 12
-    user = tmp_path / "user.yaml"
-    user.write_text("loop_closure: {candidates: 3}\n")
-    args = ["run", "synthetic/tiny_loop", "--out", str(tmp_path / "out"), "--config", str(user)]
-    args += ["--max-frames", str(frames), "--data-root", str(synthetic_root)]
-    read_yaml, open_sequence = pipeline_config.read_yaml, pipeline_config.open_sequence
-    with (
-        counting(tiny_loop) as counts,
-        mock.patch.object(pipeline_config, "read_yaml", wraps=read_yaml) as reads,
-        mock.patch.object(pipeline_config, "open_sequence", wraps=open_sequence) as opens,
-    ):
-        assert main(args) == 0
-    read = Counter(Path(call.args[0]).name for call in reads.call_args_list)
-    assert read == Counter({"synthetic.yaml": 1, "user.yaml": 1})
-    assert opens.call_count == 1
-    assert counts.decodes == Counter(range(frames))
 
 
 def sequential(config: PipelineConfig) -> PipelineConfig:

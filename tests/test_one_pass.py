@@ -1,5 +1,6 @@
 """One pass per scan: a SLAM run decodes each scan once, conditions it once and describes it
-once; the loop verifier takes a database scan back from its record, and what a run keeps per
+once (joined to a map with `radar-slam run --map` too); the loop verifier takes a database scan
+back from its record, and what a run keeps per
 scan, on a 10,000-scan drive, stays within the memory budget (`GROWTH_BUDGET_BYTES`). (Config
 files and openings of the sequence per command: tests/test_one_pass_open.py.)"""
 
@@ -7,17 +8,21 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import tracemalloc
 from collections import Counter
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from unittest import mock
 
 import numpy as np
 import pytest
 
 from odometry import preprocess_polar
+from radar_slam.cli import main
+from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.maps.images import PSEUDO_SENSOR
 from radar_slam.maps.keyframes import KeyframeRecorder
@@ -165,6 +170,27 @@ def test_each_scan_is_described_once(counted_run: CountedRun) -> None:
     taken = pipeline.keyframes.descriptors_taken  # type: ignore[attr-defined]
     assert taken == len(recorded.records)
     assert max(counts.pose_images.values()) == 1
+
+
+def test_a_session_joined_to_a_map_is_read_and_described_once(
+    synthetic_root: Path, tmp_path: Path
+) -> None:
+    """`run --map`: the session's keyframes are looked up in the map as the run makes them; no
+    scan is read or described again to join the map or to extend it."""
+    stride = 4
+    root = ["--data-root", str(synthetic_root), "--stride", str(stride)]
+    assert main(["run", "synthetic/tiny_reverse_a", "--out", str(tmp_path / "a"), *root]) == 0
+    session = open_sequence("synthetic/tiny_reverse_b", synthetic_root)
+    args = ["run", "synthetic/tiny_reverse_b", "--map", str(tmp_path / "a" / "map")]
+    with counting(session) as counts:
+        assert main([*args, "--out", str(tmp_path / "ab"), *root]) == 0
+    joined = json.loads((tmp_path / "ab" / "multisession.json").read_text())
+    assert joined["met_map"] and joined["intersession_accepted"] >= 10
+    scans = range(0, len(session), stride)
+    assert joined["map_keyframes"] > len(scans)  # the map's and every scan of the session
+    assert counts.decodes == Counter(scans)
+    assert max(counts.described.values()) == 1
+    assert sum(counts.described.values()) == len(scans)  # every scan, once (at this stride)
 
 
 def sequential(config: PipelineConfig) -> PipelineConfig:

@@ -47,6 +47,7 @@ from radar_slam.loops import (
 )
 from radar_slam.loops.config import CHI2_3DOF_99, LOOP_RAPLACE
 from radar_slam.maps.keyframes import (
+    KeyframeListener,
     KeyframeRecorder,
     KeyframeStage,
     NullKeyframeRecorder,
@@ -107,6 +108,9 @@ class Pipeline:
         record_map: keep each map keyframe's descriptor and image as the run goes
             (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again);
             the database scans of the loop detector are recorded either way.
+        on_keyframe: receives each map keyframe as its record is made, with its raw scan,
+            sweep twist and descriptor (`radar_slam.maps.keyframes.KeyframeListener`; e.g. the
+            inter-session queries of `radar-slam run --map`); implies `record_map`.
     """
 
     def __init__(
@@ -118,6 +122,7 @@ class Pipeline:
         loop_detector: LoopDetectorProtocol | None = None,
         observer: PipelineObserver | None = None,
         record_map: bool = False,
+        on_keyframe: KeyframeListener | None = None,
     ) -> None:
         self.sequence = sequence
         self.observer = observer
@@ -125,8 +130,8 @@ class Pipeline:
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
-        self.record_map = record_map
-        self.keyframes = self._keyframe_stage(record_map, loop_detector is None)
+        self.record_map = record_map or on_keyframe is not None
+        self.keyframes = self._keyframe_stage(self.record_map, loop_detector is None, on_keyframe)
         self.loop_detector: LoopDetectorProtocol = (
             make_loop_detector(
                 self.config.loop_closure,
@@ -199,16 +204,19 @@ class Pipeline:
             self.observer.on_finish(results)
         return results
 
-    def _keyframe_stage(self, record_map: bool, own_detector: bool) -> KeyframeStage:
+    def _keyframe_stage(
+        self, record_map: bool, own_detector: bool, on_keyframe: KeyframeListener | None
+    ) -> KeyframeStage:
         """The scan records of the run (`radar_slam.maps.keyframes`): the map keyframes when
-        `record_map`, and the loop database's scans when the run's own detector closes loops
-        (it verifies them from their records); else nothing is kept."""
+        `record_map` (each handed to `on_keyframe` too), and the loop database's scans when the
+        run's own detector closes loops (it verifies them from their records); else nothing is
+        kept."""
         cfg = self.config
         loops = own_detector and cfg.loop_closure.enabled
         if not (record_map or loops):
             return NullKeyframeRecorder()
         return KeyframeRecorder(
-            cfg.maps, cfg.odometry, LOOP_RAPLACE.descriptor, keep_map=record_map
+            cfg.maps, cfg.odometry, LOOP_RAPLACE.descriptor, record_map, on_keyframe
         )
 
     # -- per-scan steps -----------------------------------------------------------------------

@@ -10,10 +10,9 @@ de-skewed with the scan's sweep twist, `radar_slam.loops.sweep_twist`); the desc
 the loop detector made of the scan when it made one. A `KeyframeListener` given to the recorder
 receives each map keyframe as its record is made, with the raw scan, its sweep twist and its
 descriptor (`radar-slam run --map` looks it up in the map then, `radar_slam.maps.session`). It
-keeps the records (about 30 kB per scan
-at the default image geometry), never the scans: the loop verifier takes a database scan back
-from its record (`scan`), and `radar_slam.maps.build.build_map` writes the map from them, so
-that no scan is read twice.
+keeps the records (about 30 kB per scan at the default image geometry), never the scans: the
+loop verifier takes a database scan back from its record (`scan`), and
+`radar_slam.maps.build.build_map` writes the map from them, so that no scan is read twice.
 
 `describe_keyframe` is the one recipe of a keyframe's content, used by the recorder and by the
 rebuild from a sequence (`radar_slam.maps.build.describe_keyframes`): a map made either way is

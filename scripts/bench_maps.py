@@ -38,7 +38,7 @@ from radar_slam.maps import Map, build_map
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import encode_map, map_bytes
 from radar_slam.maps.localizer import Localizer
-from radar_slam.maps.session import join_session
+from radar_slam.maps.session import InterSessionQueries, join_session
 from radar_slam.maps.session import summary as joined_summary
 from radar_slam.pipeline import Pipeline, load_config
 
@@ -79,8 +79,9 @@ def bench_pair(pair: str, data_root: Path | None) -> dict[str, Any]:
             cpu += time.process_time() - c
         metrics = evaluate_localization(fixes, np.asarray(query_seq.ground_truth), m)
         assert metrics is not None
-        query_run = Pipeline(query_seq, config).run()
-        joined = join_session(query_run, query_seq, m)
+        queries = InterSessionQueries(m, config)
+        query_run = Pipeline(query_seq, config, on_keyframe=queries).run()
+        joined = join_session(query_run, m, queries)
         _, joined_same, joined_size = round_trip(joined.map, Path(tmp) / "joined")
     return {
         "pair": pair,

@@ -43,17 +43,20 @@ import os
 import resource
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from odometry import Scan
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.false_loops import FalseLoopInjection
 from radar_slam.loops import GeometricVerifier, LoopDetector
 from radar_slam.loops.config import LOOP_RAPLACE
+from radar_slam.loops.detector import DescriptorListener
 from radar_slam.pipeline import Pipeline, PipelineConfig, Results, load_config
 from raplace import PlaceRecognizer
 
@@ -124,7 +127,7 @@ def run_once(
     sequence: RadarSequence, config: PipelineConfig, max_frames: int | None, inject: float | None
 ) -> tuple[Results, float, int]:
     """(results, CPU seconds, injected false loops that passed verification)."""
-    detector = None
+    factory = None
     injection = None
     if inject is not None:
         gt = sequence.ground_truth
@@ -136,15 +139,22 @@ def run_once(
         cfg = dataclasses.replace(config.loop_closure, odometry_drift_fraction=np.inf)
         recognizer = injection.recognizer(PlaceRecognizer(LOOP_RAPLACE.retrieval))
         verifier = injection.verifier(GeometricVerifier(cfg, config.odometry))
-        detector = LoopDetector(
-            cfg,
-            scan_loader=lambda k: sequence[k],
-            recognizer=recognizer,
-            verifier=verifier,
-            odometry=config.odometry,
-        )
+
+        def factory(
+            scans: Callable[[int], Scan], descriptors: DescriptorListener
+        ) -> LoopDetector:  # verifies from the run's scan records, as the configured one
+            return LoopDetector(
+                cfg,
+                scan_loader=scans,
+                recognizer=recognizer,
+                verifier=verifier,
+                on_describe=descriptors,
+                odometry=config.odometry,
+            )
+
     cpu = time.process_time()
-    results = Pipeline(sequence, config, max_frames=max_frames, loop_detector=detector).run()
+    pipeline = Pipeline(sequence, config, max_frames=max_frames, loop_detector_factory=factory)
+    results = pipeline.run()
     cpu = time.process_time() - cpu
     return results, cpu, 0 if injection is None else len(injection.passed)
 

@@ -22,7 +22,7 @@ from radar_slam.maps.build import select_keyframes
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import DATA_FILES, MANIFEST_FILE, encode_map
 from radar_slam.maps.localizer import Localization, Localizer
-from radar_slam.maps.session import join_session
+from radar_slam.maps.session import InterSessionQueries, join_session
 from radar_slam.maps.writers import LOCALIZATION_CSV_COLUMNS
 from radar_slam.pipeline import Pipeline, Results, load_config
 from radar_slam.trajectory import read_tum
@@ -317,8 +317,10 @@ def test_reverse_session_joins_the_map(
     """The reverse session is tied to the map by verified inter-session loops, all true, and
     lands in the map's frame within 1 m ATE without re-alignment."""
     b = reverse_pair[1]
-    run = Pipeline(b, load_config("synthetic")).run()
-    joined = join_session(run, b, reverse_map)
+    config = load_config("synthetic")
+    queries = InterSessionQueries(reverse_map, config)
+    run = Pipeline(b, config, on_keyframe=queries).run()
+    joined = join_session(run, reverse_map, queries)
     assert joined.met_map
     accepted = [n for n, d in enumerate(joined.loops) if d.accepted]
     assert len(accepted) >= 2
@@ -343,8 +345,9 @@ def test_a_session_elsewhere_never_meets_the_map(tiny: RadarSequence, oxford_dir
     oxford = open_sequence(str(oxford_dir))
     config = load_config("synthetic")
     oxford_map = build_map(Pipeline(oxford, load_config("oxford")).run(), oxford)
-    run = Pipeline(tiny, config, max_frames=30).run()
-    joined = join_session(run, tiny, oxford_map)
+    queries = InterSessionQueries(oxford_map, config)
+    run = Pipeline(tiny, config, max_frames=30, on_keyframe=queries).run()
+    joined = join_session(run, oxford_map, queries)
     assert not joined.met_map
     assert not any(d.accepted for d in joined.loops)
     np.testing.assert_allclose(joined.results.slam.poses, run.slam.poses)

@@ -1,120 +1,42 @@
 """One pass per scan: a SLAM run decodes each scan once, conditions it once and describes it
-once; the loop verifier takes a database scan back from its record, `radar-slam run` reads its
-config files and opens its sequence once, and what a run keeps per scan, on a 10,000-scan drive,
-stays within the memory budget (`GROWTH_BUDGET_BYTES`)."""
+once (joined to a map with `radar-slam run --map` too); the loop verifier takes a database scan
+back from its record (in `radar-slam loops` too), and what a run keeps per scan, on a
+10,000-scan drive, stays within the memory budget (`GROWTH_BUDGET_BYTES`). (Config files and
+openings of the sequence per command: tests/test_one_pass_open.py.)"""
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
+import json
 import tracemalloc
 from collections import Counter
-from collections.abc import Iterator
-from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 import pytest
+from scan_counts import Counts, counting
 
-from odometry import preprocess_polar
 from radar_slam.cli import main
-from radar_slam.datasets.frame import RadarFrame, RadarSequence
-from radar_slam.maps.images import PSEUDO_SENSOR
-from radar_slam.maps.keyframes import KeyframeRecorder
-from radar_slam.pipeline import Pipeline, PipelineConfig, Progress, Results, load_config
-from raplace import DescriptorExtractor, PoseEstimator
-
-CONDITIONING_SITES = (
-    "odometry.odometry",
-    "odometry.registration",
-    "radar_slam.maps.images",
-    "radar_slam.maps.keyframes",
+from radar_slam.datasets import open_sequence
+from radar_slam.datasets.frame import RadarSequence
+from radar_slam.g2o import G2oEdge, G2oGraph
+from radar_slam.pipeline import (
+    Pipeline,
+    PipelineConfig,
+    Progress,
+    Results,
+    close_loops_on_graph,
+    load_config,
 )
-"""The modules that call the odometry's conditioning (`preprocess_polar`) on a scan."""
+from raplace import between
+
 DRIVE_SCANS = 10_000
 """The drive the memory budget is stated for (MulRan resolution, default config)."""
 GROWTH_BUDGET_BYTES = 600 * 2**20
 """What a run may keep per scan, times `DRIVE_SCANS` (docs/benchmarks.md, Memory budget)."""
 WARM_SCANS = 40
 """Scans after which the run's fixed working memory is allocated (odometry images, caches)."""
-
-
-def content_key(polar: np.ndarray) -> str:
-    """A scan's polar image as a key (the same image: the same key)."""
-    return hashlib.sha1(np.ascontiguousarray(polar).tobytes()).hexdigest()
-
-
-@dataclass
-class Counts:
-    """What a run did to its scans.
-
-    Attributes:
-        decodes: scan index -> reads of the sequence.
-        conditioned: scan timestamp [ns] -> odometry conditionings of the scan itself.
-        record_conditioned: conditionings of database scans remade from their records.
-        described: polar image -> RaPlace descriptors made of it.
-        pose_images: polar image of a scan -> RaPlace pose images made of it.
-        records_read: database scans taken back from their records for verification.
-        record_pose_images: RaPlace pose images made of those.
-    """
-
-    decodes: Counter[int]
-    conditioned: Counter[int]
-    record_conditioned: int
-    described: Counter[str]
-    pose_images: Counter[str]
-    records_read: int
-    record_pose_images: int
-
-
-@contextmanager
-def counting(sequence: RadarSequence) -> Iterator[Counts]:
-    """Count, while in the block, the reads of `sequence`'s scans, the odometry's conditionings,
-    the RaPlace descriptors and pose images, and the records read back."""
-    kind = type(sequence)
-    with ExitStack() as stack:
-        read = stack.enter_context(
-            mock.patch.object(kind, "__getitem__", autospec=True, side_effect=kind.__getitem__)
-        )
-        conditionings = [
-            stack.enter_context(mock.patch(f"{site}.preprocess_polar", wraps=preprocess_polar))
-            for site in CONDITIONING_SITES
-        ]
-        describe = stack.enter_context(
-            mock.patch.object(
-                DescriptorExtractor,
-                "__call__",
-                autospec=True,
-                side_effect=DescriptorExtractor.__call__,
-            )
-        )
-        pose = stack.enter_context(
-            mock.patch.object(
-                PoseEstimator, "image", autospec=True, side_effect=PoseEstimator.image
-            )
-        )
-        records: list[RadarFrame] = []
-        scan_of_record = KeyframeRecorder.scan
-
-        def read_record(recorder: KeyframeRecorder, scan_index: int) -> RadarFrame:
-            records.append(scan_of_record(recorder, scan_index))
-            return records[-1]
-
-        stack.enter_context(mock.patch.object(KeyframeRecorder, "scan", read_record))
-        counts = Counts(Counter(), Counter(), 0, Counter(), Counter(), 0, 0)
-        yield counts
-        counts.decodes.update(int(call.args[1]) for call in read.call_args_list)
-        scans = [call.args[0] for m in conditionings for call in m.call_args_list]
-        counts.conditioned.update(int(s.timestamp_ns) for s in scans if s.sensor != PSEUDO_SENSOR)
-        counts.record_conditioned = sum(s.sensor == PSEUDO_SENSOR for s in scans)
-        counts.described.update(content_key(call.args[1]) for call in describe.call_args_list)
-        from_records = {content_key(frame.polar) for frame in records}
-        imaged = [content_key(call.args[1]) for call in pose.call_args_list]
-        counts.pose_images.update(key for key in imaged if key not in from_records)
-        counts.record_pose_images = sum(key in from_records for key in imaged)
-        counts.records_read = len(records)
 
 
 @dataclass(frozen=True)
@@ -169,27 +91,50 @@ def test_each_scan_is_described_once(counted_run: CountedRun) -> None:
     assert max(counts.pose_images.values()) == 1
 
 
-def test_radar_slam_run_opens_and_configures_once(
-    tiny_loop: RadarSequence, synthetic_root: Path, tmp_path: Path
-) -> None:
-    from radar_slam.pipeline import config as pipeline_config
+VERTEX_BASE = 1000
+"""Vertex ids of the graph given to `radar-slam loops` start here (not the scan indices)."""
 
-    frames = 12
-    user = tmp_path / "user.yaml"
-    user.write_text("loop_closure: {candidates: 3}\n")
-    args = ["run", "synthetic/tiny_loop", "--out", str(tmp_path / "out"), "--config", str(user)]
-    args += ["--max-frames", str(frames), "--data-root", str(synthetic_root)]
-    read_yaml, open_sequence = pipeline_config.read_yaml, pipeline_config.open_sequence
-    with (
-        counting(tiny_loop) as counts,
-        mock.patch.object(pipeline_config, "read_yaml", wraps=read_yaml) as reads,
-        mock.patch.object(pipeline_config, "open_sequence", wraps=open_sequence) as opens,
-    ):
-        assert main(args) == 0
-    read = Counter(Path(call.args[0]).name for call in reads.call_args_list)
-    assert read == Counter({"synthetic.yaml": 1, "user.yaml": 1})
-    assert opens.call_count == 1
-    assert counts.decodes == Counter(range(frames))
+
+def test_loops_on_another_graph_read_each_scan_once(
+    tiny_loop: RadarSequence, counted_run: CountedRun
+) -> None:
+    """`radar-slam loops`: candidates are verified from their records, keyed by vertex id."""
+    poses = counted_run.results.odometry.poses
+    info = np.eye(3)
+    vertices = {VERTEX_BASE + k: pose for k, pose in enumerate(poses)}
+    edges = [
+        G2oEdge(VERTEX_BASE + k, VERTEX_BASE + k + 1, between(poses[k], poses[k + 1]), info)
+        for k in range(len(poses) - 1)
+    ]
+    with counting(tiny_loop) as counts:
+        run = close_loops_on_graph(
+            G2oGraph(vertices, edges, [VERTEX_BASE]), tiny_loop, load_config("synthetic")
+        )
+    assert run.n_accepted >= 4
+    assert all(d.query_key >= VERTEX_BASE and d.match_key >= VERTEX_BASE for d in run.loops)
+    assert counts.decodes == Counter(range(len(tiny_loop)))
+    assert counts.records_read >= len(run.loops)
+
+
+def test_a_session_joined_to_a_map_is_read_and_described_once(
+    synthetic_root: Path, tmp_path: Path
+) -> None:
+    """`run --map`: the session's keyframes are looked up in the map as the run makes them; no
+    scan is read or described again to join the map or to extend it."""
+    stride = 4
+    root = ["--data-root", str(synthetic_root), "--stride", str(stride)]
+    assert main(["run", "synthetic/tiny_reverse_a", "--out", str(tmp_path / "a"), *root]) == 0
+    session = open_sequence("synthetic/tiny_reverse_b", synthetic_root)
+    args = ["run", "synthetic/tiny_reverse_b", "--map", str(tmp_path / "a" / "map")]
+    with counting(session) as counts:
+        assert main([*args, "--out", str(tmp_path / "ab"), *root]) == 0
+    joined = json.loads((tmp_path / "ab" / "multisession.json").read_text())
+    assert joined["met_map"] and joined["intersession_accepted"] >= 10
+    scans = range(0, len(session), stride)
+    assert joined["map_keyframes"] > len(scans)  # the map's and every scan of the session
+    assert counts.decodes == Counter(scans)
+    assert max(counts.described.values()) == 1
+    assert sum(counts.described.values()) == len(scans)  # every scan, once (at this stride)
 
 
 def sequential(config: PipelineConfig) -> PipelineConfig:

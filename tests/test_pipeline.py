@@ -6,12 +6,16 @@ loops added to another odometry's g2o graph."""
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scan_counts import counting
 from slam_bars import loops_corrected
 
+from odometry import Scan
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import ConfigError, RadarSlamError
 from radar_slam.evaluation.false_loops import FakeLoopConfig, FalseLoopInjection
@@ -24,6 +28,7 @@ from radar_slam.loops import (
     LoopDetector,
 )
 from radar_slam.loops.config import LOOP_RAPLACE
+from radar_slam.loops.detector import DescriptorListener
 from radar_slam.pipeline import (
     Pipeline,
     PipelineConfig,
@@ -116,14 +121,22 @@ def test_thirty_percent_false_loops_raise_the_ate_at_most_ten_percent(
     injection = FalseLoopInjection(
         np.asarray(gt), FALSE_FRACTION, np.random.default_rng(INJECTION_SEED), FAKE_LOOP
     )
-    detector = LoopDetector(
-        cfg,
-        scan_loader=lambda k: tiny_loop[k],
-        recognizer=injection.recognizer(PlaceRecognizer(LOOP_RAPLACE.retrieval)),
-        verifier=injection.verifier(GeometricVerifier(cfg, config.odometry)),
-        odometry=config.odometry,
-    )
-    injected = Pipeline(tiny_loop, config, loop_detector=detector).run()
+
+    def detector(scans: Callable[[int], Scan], descriptors: DescriptorListener) -> LoopDetector:
+        return LoopDetector(
+            cfg,
+            scan_loader=scans,
+            recognizer=injection.recognizer(PlaceRecognizer(LOOP_RAPLACE.retrieval)),
+            verifier=injection.verifier(GeometricVerifier(cfg, config.odometry)),
+            on_describe=descriptors,
+            odometry=config.odometry,
+        )
+
+    with counting(tiny_loop) as counts:
+        injected = Pipeline(tiny_loop, config, loop_detector_factory=detector).run()
+    # the injected detector verifies from the run's records: each scan is read once
+    assert counts.decodes == Counter(range(len(tiny_loop)))
+    assert counts.records_read >= len(injected.loops) > 0
     assert len(injection.passed) >= 5  # false loops did pass the (fake) verification
     accepted = {(d.query_key, d.match_key) for d in injected.accepted_loops}
     assert not accepted & injection.passed

@@ -30,7 +30,7 @@ from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.stride import strided
 from radar_slam.maps.build import build_map  # every run writes map/
 from radar_slam.maps.format import Map, write_map
-from radar_slam.maps.session import join_session  # run --map
+from radar_slam.maps.session import InterSessionQueries, join_session  # run --map
 from radar_slam.maps.writers import write_joined
 from radar_slam.outputs import (
     odometry_summary,
@@ -109,6 +109,7 @@ def run_command(
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
     observer = None if viewer is None else RerunViewer(viewer, f"{seq.family}/{seq.name}")
+    queries = None if prior_map is None else InterSessionQueries(prior_map, settings)
     with progress_bar(total, f"{seq.family}/{seq.name}") as bar:  # until map/ is written
         try:
             results = Pipeline(
@@ -118,12 +119,13 @@ def run_command(
                 progress=bar,
                 observer=observer,
                 record_map=True,  # map/ is written from what the run keeps
+                on_keyframe=queries,  # run --map: each keyframe looked up in the map
             ).run()
         except BaseException:
             if observer is not None:
                 observer.abandon()
             raise
-        folder, results, joined_text = write_run(seq, results, prior_map, out, bar)
+        folder, results, joined_text = write_run(seq, results, prior_map, queries, out, bar)
     typer.echo(slam_summary(results), nl=False)
     typer.echo(joined_text, nl=False)  # run --map
     typer.echo(f"results in {folder}")
@@ -135,15 +137,17 @@ def write_run(
     seq: RadarSequence,
     results: Results,
     prior_map: Map | None,
+    queries: InterSessionQueries | None,
     out: Path | None,
     bar: RunProgress,
 ) -> tuple[Path, Results, str]:
     """Write the result folder of a finished run, map/ included (with `prior_map`: the session
-    joined to it first); returns the folder, the results written (in the map's frame when
-    joined) and the text about the join ("" without)."""
-    if prior_map is not None:
+    joined to it first, from the run's `queries` of it); returns the folder, the results written
+    (in the map's frame when joined) and the text about the join ("" without)."""
+    joined = None
+    if prior_map is not None and queries is not None:
         bar.step("joining the map")
-    joined = None if prior_map is None else join_session(results, seq, prior_map)
+        joined = join_session(results, prior_map, queries)
     written = results if joined is None else joined.results  # in the map's frame
     joined_text: list[str] = []
 
@@ -151,7 +155,7 @@ def write_run(
         bar.step("results")
         write_results(folder, written)
         bar.step("map")
-        the_map = build_map(written, seq) if joined is None else joined.map
+        the_map = build_map(written) if joined is None else joined.map
         write_map(folder / MAP_FOLDER, the_map)
         if joined is not None:
             joined_text.append(write_joined(folder, joined))

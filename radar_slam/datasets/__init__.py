@@ -11,7 +11,7 @@ from __future__ import annotations
 from radar_slam.datasets.boreas import BoreasSequence
 from radar_slam.datasets.frame import RadarFrame, RadarSequence, Sequence
 from radar_slam.datasets.mulran import MulRanSequence
-from radar_slam.datasets.open import open_sequence
+from radar_slam.datasets.open import locate_sequence, open_located, open_sequence
 from radar_slam.datasets.oxford import OxfordSequence
 from radar_slam.datasets.radiate import RadiateSequence
 from radar_slam.datasets.registry import DatasetConfig, data_root, families
@@ -29,5 +29,7 @@ __all__ = [
     "Sequence",
     "data_root",
     "families",
+    "locate_sequence",
+    "open_located",
     "open_sequence",
 ]

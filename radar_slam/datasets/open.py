@@ -60,13 +60,8 @@ def open_sequence(
     data_root: str | os.PathLike[str] | None = None,
     options: DatasetConfig | None = None,
 ) -> RadarSequence:
-    """Open a sequence named `family/sequence` or given as a path to its folder.
-
-    `family/sequence` resolves to `<root>/<family>/<sequence>` (family folder matched
-    case-insensitively), where root is `data_root`, else $RADAR_SLAM_DATA, else ./data. A
-    family with a resolver (e.g. generated data) supplies the folder itself. Any other spec is a
-    folder path whose family is detected from its layout; a bare name that is not a folder is
-    also looked for as `<root>/<family>/<name>` in every family without a resolver.
+    """Open a sequence named `family/sequence` or given as a path to its folder
+    (`locate_sequence` finds it).
 
     `options` (the `dataset:` config section) overrides loader settings such as the range
     resolution.
@@ -75,9 +70,40 @@ def open_sequence(
         DatasetNotFoundError: nothing found; the message names every place looked in, the
             expected layouts and where to obtain the data.
         DatasetFormatError: the folder was found but its content is malformed.
+        ConfigError: `options` sets a loader setting the family does not take.
+    """
+    family, path = locate_sequence(spec, data_root)
+    return open_located(family, path, options)
+
+
+def open_located(family: Family, path: Path, options: DatasetConfig | None = None) -> RadarSequence:
+    """Open the sequence at `path` (found by `locate_sequence`) with the loader settings of
+    `options`.
+
+    Raises:
+        DatasetFormatError: the content is malformed.
+        ConfigError: `options` sets a loader setting the family does not take.
+    """
+    return _open_with(family, path, (options or DatasetConfig()).loader_options())
+
+
+def locate_sequence(
+    spec: str | os.PathLike[str], data_root: str | os.PathLike[str] | None = None
+) -> tuple[Family, Path]:
+    """The family and the folder (or recording file) of a sequence, without opening it, so
+    that its family's settings can be known before it is opened.
+
+    `family/sequence` resolves to `<root>/<family>/<sequence>` (family folder matched
+    case-insensitively), where root is `data_root`, else $RADAR_SLAM_DATA, else ./data. A
+    family with a resolver (e.g. generated data) supplies the folder itself. Any other spec is a
+    folder path whose family is detected from its layout; a bare name that is not a folder is
+    also looked for as `<root>/<family>/<name>` in every family without a resolver.
+
+    Raises:
+        DatasetNotFoundError: nothing found; the message names every place looked in, the
+            expected layouts and where to obtain the data.
     """
     root = registry.data_root(data_root)
-    loader_options = (options or DatasetConfig()).loader_options()
     candidates: list[Family] = list(families().values())
     named = _split_family_spec(spec) if isinstance(spec, str) else None
     if named is not None:
@@ -85,12 +111,12 @@ def open_sequence(
         candidates = [family]
         folder = sequence_folder(root, family, sequence)
         if folder.is_dir() or (folder.is_file() and family.detect(folder)):  # file: a ROS 1 bag
-            return _open_with(family, folder, loader_options)
+            return family, folder
     path = Path(spec).expanduser()
     if path.is_dir() or path.is_file():  # a file: a recording such as a ROS 1 bag
         detected = detect_family(path)
         if detected is not None:
-            return _open_with(detected, path, loader_options)
+            return detected, path
         raise DatasetNotFoundError(
             f"{path} exists but matches no known dataset layout; expected one of: "
             f"{_layouts_and_sources(candidates)}"
@@ -101,7 +127,7 @@ def open_sequence(
                 continue
             folder = family_folder(root, family.name) / spec.strip(SPEC_SEPARATOR)
             if folder.is_dir() and family.detect(folder):
-                return _open_with(family, folder, loader_options)
+                return family, folder
     family_named = None if named is None else named[0]
     raise DatasetNotFoundError(_not_found(str(spec), root, family_named))
 

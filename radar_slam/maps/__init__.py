@@ -7,7 +7,8 @@
 
 The on-disk format is specified in docs/map_format.md. The map I/O (`format`, `images`,
 `config`) does not import GTSAM; the names built on the pose graph (`build_map`, `Localizer`,
-`join_session`) are imported on first use (PEP 562), so `import radar_slam.maps` stays light.
+`join_session`, `InterSessionQueries`) are imported on first use (PEP 562), so
+`import radar_slam.maps` stays light.
 """
 
 from __future__ import annotations
@@ -23,12 +24,14 @@ _LAZY = {
     "build_map": "radar_slam.maps.build",
     "Localization": "radar_slam.maps.localizer",
     "Localizer": "radar_slam.maps.localizer",
+    "InterSessionQueries": "radar_slam.maps.session",
     "JoinedSession": "radar_slam.maps.session",
     "join_session": "radar_slam.maps.session",
 }
 
 __all__ = [
     "ImageGeometry",
+    "InterSessionQueries",
     "JoinedSession",
     "KeyframeImager",
     "Localization",

@@ -7,10 +7,12 @@ and its odometry result. It makes a record of the map keyframes along the odomet
 (`KeyframeSpacing`, when the run keeps a map) and of every scan the loop detector enters into its
 place database (`offer_descriptor`), as soon as the step after the scan is known (the image is
 de-skewed with the scan's sweep twist, `radar_slam.loops.sweep_twist`); the descriptor is the one
-the loop detector made of the scan when it made one. It keeps the records (about 30 kB per scan
-at the default image geometry), never the scans: the loop verifier takes a database scan back
-from its record (`scan`), and `radar_slam.maps.build.build_map` writes the map from them, so
-that no scan is read twice.
+the loop detector made of the scan when it made one. A `KeyframeListener` given to the recorder
+receives each map keyframe as its record is made, with the raw scan, its sweep twist and its
+descriptor (`radar-slam run --map` looks it up in the map then, `radar_slam.maps.session`). It
+keeps the records (about 30 kB per scan at the default image geometry), never the scans: the
+loop verifier takes a database scan back from its record (`scan`), and
+`radar_slam.maps.build.build_map` writes the map from them, so that no scan is read twice.
 
 `describe_keyframe` is the one recipe of a keyframe's content, used by the recorder and by the
 rebuild from a sequence (`radar_slam.maps.build.describe_keyframes`): a map made either way is
@@ -20,6 +22,7 @@ the same.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -46,6 +49,10 @@ log = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 DESCRIPTOR_DTYPE = np.float16
 """How a map stores its descriptors (half precision: half the bytes, ample for retrieval)."""
+KeyframeListener = Callable[[int, Scan, "FloatArray | None", NDArray[np.float32]], None]
+"""Takes a map keyframe as its record is made: its scan index, the raw scan, its sweep twist
+(3,) (vx, vy [m/s], yaw rate [rad/s]) or None, and its RaPlace descriptor (n_theta, n_freq)
+float32 (not to be changed)."""
 
 
 class KeyframeSpacing:
@@ -178,6 +185,8 @@ class KeyframeRecorder:
         odometry: the odometry settings (conditioning, the vehicle's limits).
         descriptor: the RaPlace descriptor settings.
         keep_map: record the map keyframes (else only the scans offered a descriptor).
+        on_keyframe: receives each map keyframe as its record is made (in the thread of the
+            call that makes it: `add` or `finish`).
     """
 
     def __init__(
@@ -186,11 +195,13 @@ class KeyframeRecorder:
         odometry: OdometryConfig,
         descriptor: DescriptorConfig,
         keep_map: bool = True,
+        on_keyframe: KeyframeListener | None = None,
     ) -> None:
         self.maps = maps
         self.odometry = odometry
         self.descriptor_config = descriptor
         self.keep_map = keep_map
+        self.on_keyframe = on_keyframe
         self.imager = KeyframeImager(KEYFRAME_IMAGE, odometry)
         self.describe = DescriptorExtractor(descriptor)
         self.spacing = KeyframeSpacing(maps.keyframe_spacing_m)
@@ -199,7 +210,7 @@ class KeyframeRecorder:
         """Scan index -> (its record, its timestamp [ns]): the map keyframes and the scans
         offered a descriptor."""
         self._held: _Held | None = None
-        self._offered: tuple[int, NDArray[np.float16]] | None = None
+        self._offered: tuple[int, NDArray[np.float32]] | None = None
         self.descriptors_taken = 0
         """Keyframes whose descriptor came from `offer_descriptor` (not made here)."""
 
@@ -218,7 +229,7 @@ class KeyframeRecorder:
         same settings, as the scan enters its database): the scan is recorded with it."""
         held = self._held
         if held is not None and held.result.index == scan_index:
-            self._offered = (scan_index, np.asarray(descriptor, dtype=DESCRIPTOR_DTYPE))
+            self._offered = (scan_index, np.asarray(descriptor, dtype=np.float32))
 
     def scan(self, scan_index: int) -> RadarFrame:
         """A recorded scan as its image sampled back onto a polar grid
@@ -266,11 +277,16 @@ class KeyframeRecorder:
         self.descriptors_taken += descriptor is not None and held.keyframe
         if held.keyframe:
             self._keyframes.append(index)
-        twist = sweep_twist(held.before, after, mean_acquisition_time_ns(held.frame))
+        frame = held.frame
+        twist = sweep_twist(held.before, after, mean_acquisition_time_ns(frame))
+        if descriptor is None:
+            descriptor = self.describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
         record = describe_keyframe(
-            index, held.frame, twist, self.imager, self.describe, held.polar, descriptor
+            index, frame, twist, self.imager, self.describe, held.polar, descriptor
         )
-        self.records[index] = (record, int(held.frame.timestamp_ns))
+        self.records[index] = (record, int(frame.timestamp_ns))
+        if held.keyframe and self.on_keyframe is not None:
+            self.on_keyframe(index, frame, twist, descriptor)
 
 
 class KeyframeStage(Protocol):

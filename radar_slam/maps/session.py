@@ -1,14 +1,18 @@
 """Multi-session SLAM: tie a new session to a map by verified inter-session loops.
 
-`join_session(results, sequence, map)` takes a finished SLAM run of the new session (its own
-frame) and
+`join_session(results, map, queries)` takes a finished SLAM run of the new session (its own
+frame), made with `Pipeline(on_keyframe=queries)` where `queries` is the map's
+`InterSessionQueries`, and
 
-1. looks for inter-session loops: every `loop_closure.query_spacing_m` of the session's path the
-   scan's RaPlace descriptor is looked up among all map keyframes, the best candidates are
-   verified as loops are (`radar_slam.loops.GeometricVerifier`, against the keyframe's stored
-   image), and the verified ones pass the same pairwise consistency gate as intra-session loops
-   (`ConsistencyGate`: two loops must close the cycle through the session's trajectory and the
-   map's), so a loop is accepted only once another one agrees with it;
+1. looks for inter-session loops: as the run makes each of its map keyframes (every
+   `maps.keyframe_spacing_m` of its odometry path), `queries` looks the keyframe's RaPlace
+   descriptor up among all map keyframes and verifies the best candidates as loops are
+   (`radar_slam.loops.GeometricVerifier`, the raw scan against the map keyframe's stored image),
+   so that no scan is read or described again after the run; after the run, the verified ones,
+   in scan order, pass the same pairwise consistency gate as intra-session loops
+   (`ConsistencyGate` with the session's optimised path: two loops must close the cycle through
+   the session's trajectory and the map's), so a loop is accepted only once another one agrees
+   with it;
 2. if any is accepted, solves one pose graph: the map keyframes the loops touch, held by tight
    priors at their map poses; the session's scans joined by their odometry factors and accepted
    intra-session loops; the inter-session loops as robust loop factors. The initial guess places
@@ -31,8 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import Velocity
-from radar_slam.datasets.frame import RadarSequence
+from odometry import Scan
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
@@ -43,7 +46,7 @@ from radar_slam.loops import (
     LoopStatus,
     VerifiedLoop,
 )
-from radar_slam.loops.sweep_twist import scan_sweep_twist, step_velocities
+from radar_slam.loops.config import LOOP_RAPLACE
 from radar_slam.maps.build import (
     EDGE_KINDS,
     build_map,
@@ -110,73 +113,105 @@ def map_paths(m: Map) -> FloatArray:
     return np.cumsum(steps)
 
 
-class InterSessionDetector:
-    """Verified, pairwise-consistent loops from a session's scans to a map's keyframes."""
+class InterSessionQueries:
+    """A session's map keyframes looked up among a map's keyframes and verified as the run makes
+    them (a `radar_slam.maps.keyframes.KeyframeListener` for `Pipeline(on_keyframe=...)`).
+
+    Per keyframe, the candidates below `max_descriptor_distance` are verified best first until
+    one passes (one verified loop per query, as the intra-session detector); the decisions wait
+    in `verified` for `join_session`, which judges them with the session's optimised path.
+    Called from one thread at a time (the run's loop thread or its main thread).
+    """
 
     def __init__(self, m: Map, config: PipelineConfig) -> None:
         self.cfg = config.loop_closure
         self.keyframes = MapKeyframes(m, config)
-        self.describe = DescriptorExtractor(descriptor_config_of(m))
+        self.descriptor_config = descriptor_config_of(m)
+        self.describe = DescriptorExtractor(self.descriptor_config)
+        self.reuse_descriptor = self.descriptor_config == LOOP_RAPLACE.descriptor
+        """The map's descriptors are made as the run's (`LOOP_RAPLACE`): the run's serve."""
         self.verifier = GeometricVerifier(self.cfg, config.odometry)
-        self.gate = ConsistencyGate(self.cfg.consistency)
-        self.map_path_m = map_paths(m)
-        self.decisions: list[LoopDecision] = []
+        self.verified: dict[int, list[LoopDecision]] = {}
+        """Scan index -> its decisions, in the order verified (query_key = scan index,
+        match_key = map keyframe index; status "pending" when verified, else "rejected")."""
 
-    def detect(self, results: Results, sequence: RadarSequence) -> list[LoopDecision]:
-        """Query the map every `query_spacing_m` of the session's optimised path."""
-        poses = results.slam.poses
-        steps = np.r_[0.0, np.hypot(*np.diff(poses[:, :2], axis=0).T)]
-        path = np.cumsum(steps)
-        velocities = step_velocities(results.odometry_results, results.config.odometry)
-        last_query = -np.inf
-        for n in range(len(poses)):
-            self._apply(self.gate.expire(float(path[n])))
-            if path[n] - last_query < self.cfg.query_spacing_m:
-                continue
-            last_query = float(path[n])
-            self._query(n, sequence, poses[n], float(path[n]), velocities)
-        self._apply(self.gate.finish())
-        return self.decisions
-
-    def _query(
+    def __call__(
         self,
-        n: int,
-        sequence: RadarSequence,
-        pose: FloatArray,
-        path_m: float,
-        velocities: list[Velocity | None],
+        scan_index: int,
+        frame: Scan,
+        twist: FloatArray | None,
+        descriptor: NDArray[np.float32],
     ) -> None:
+        """Look one keyframe of the session up in the map and verify its candidates.
+
+        Args:
+            scan_index: its index in the session.
+            frame: the raw scan.
+            twist: (3,) its sweep twist (vx, vy [m/s], yaw rate [rad/s]), or None.
+            descriptor: its RaPlace descriptor made with the run's loop settings (made again
+                here only when the map's descriptor settings differ).
+        """
         cfg = self.cfg
-        frame = sequence[n]
-        twist = scan_sweep_twist(velocities, n, frame)
-        descriptor = self.describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
+        if not self.reuse_descriptor:
+            descriptor = self.describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
         candidates = [
             c
             for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)
             if c.distance < cfg.max_descriptor_distance
         ]
-        query = KeyScan(n, frame.timestamp_ns, frame, twist)
+        query = KeyScan(scan_index, frame.timestamp_ns, frame, twist)
+        decisions = self.verified.setdefault(scan_index, [])
         for candidate in candidates:
             kf = int(candidate.key)
             match = self.keyframes.scan(kf)
             result = self.verifier(query, match)
-            decision = len(self.decisions)
-            self.decisions.append(LoopDecision.of(query, match, kf, candidate.distance, result))
-            if not result.ok:
-                continue
-            verified = VerifiedLoop(
-                decision=decision,
-                query_key=n,
-                match_key=MAP_KEY_BASE + kf,
-                measurement=result.measurement,
-                covariance=result.covariance,
-                query_pose=pose,
-                match_pose=self.keyframes.poses[kf],
-                query_path_m=path_m,
-                match_path_m=float(self.map_path_m[kf]),
-            )
-            self._apply(self.gate.add(verified))
-            break  # one verified loop per query, as the intra-session detector
+            decisions.append(LoopDecision.of(query, match, kf, candidate.distance, result))
+            if result.ok:
+                break
+
+
+class InterSessionDetector:
+    """Pairwise-consistent loops from a session's verified inter-session proposals
+    (`InterSessionQueries`) to a map's keyframes."""
+
+    def __init__(self, m: Map, config: PipelineConfig) -> None:
+        self.cfg = config.loop_closure
+        self.poses = m.poses
+        self.gate = ConsistencyGate(self.cfg.consistency)
+        self.map_path_m = map_paths(m)
+        self.decisions: list[LoopDecision] = []
+
+    def detect(self, results: Results, queries: InterSessionQueries) -> list[LoopDecision]:
+        """Judge the proposals of each queried scan, in scan order, along the session's
+        optimised path."""
+        poses = results.slam.poses
+        steps = np.r_[0.0, np.hypot(*np.diff(poses[:, :2], axis=0).T)]
+        path = np.cumsum(steps)
+        for n in range(len(poses)):
+            self._apply(self.gate.expire(float(path[n])))
+            for proposal in queries.verified.get(n, []):
+                self._add(proposal, poses[n], float(path[n]))
+        self._apply(self.gate.finish())
+        return self.decisions
+
+    def _add(self, proposal: LoopDecision, pose: FloatArray, path_m: float) -> None:
+        decision = len(self.decisions)
+        self.decisions.append(proposal)
+        if proposal.status == "rejected":  # failed verification
+            return
+        kf = proposal.match_key
+        verified = VerifiedLoop(
+            decision=decision,
+            query_key=proposal.query_key,
+            match_key=MAP_KEY_BASE + kf,
+            measurement=proposal.measurement,
+            covariance=proposal.covariance,
+            query_pose=pose,
+            match_pose=self.poses[kf],
+            query_path_m=path_m,
+            match_path_m=float(self.map_path_m[kf]),
+        )
+        self._apply(self.gate.add(verified))
 
     def _apply(self, changes: dict[int, LoopStatus]) -> None:
         for decision, status in changes.items():
@@ -231,16 +266,17 @@ def joint_graph(
     return graph, ids
 
 
-def extended_map(
-    m: Map, results: Results, sequence: RadarSequence, poses: FloatArray, loops: list[LoopDecision]
-) -> Map:
-    """`m` with the session appended (keyframes every `keyframe_spacing_m` of the odometry path,
-    as in the run's own map, at `poses`: the session's poses in the map frame)."""
+def extended_map(m: Map, results: Results, poses: FloatArray, loops: list[LoopDecision]) -> Map:
+    """`m` with the session appended (the keyframes the run recorded, every `keyframe_spacing_m`
+    of the odometry path, as in the run's own map, at `poses`: the session's poses in the map
+    frame).
+
+    Raises:
+        RadarSlamError: the run recorded no keyframes with the map's image and descriptor
+            settings.
+    """
     scans, descriptors, images, scales = keyframe_content(
-        results,
-        sequence,
-        image_geometry_of(m),
-        descriptor_config_of(m),
+        results, None, image_geometry_of(m), descriptor_config_of(m)
     )
     stamps = results.slam.timestamps_ns
     session_index = len(m.sessions)
@@ -290,14 +326,20 @@ def _review(loops: list[LoopDecision], graph: PoseGraph, ids: dict[int, int]) ->
             loops[n] = dataclasses.replace(loops[n], status="rejected", reason=reason)
 
 
-def join_session(results: Results, sequence: RadarSequence, m: Map) -> JoinedSession:
-    """Tie a finished run to map `m` (see the module docstring)."""
-    loops = InterSessionDetector(m, results.config).detect(results, sequence)
+def join_session(results: Results, m: Map, queries: InterSessionQueries) -> JoinedSession:
+    """Tie a finished run to map `m` (see the module docstring): the run was made with
+    `Pipeline(on_keyframe=queries)`, `queries` being `InterSessionQueries(m, config)`.
+
+    Raises:
+        RadarSlamError: the run recorded no keyframes with the map's image and descriptor
+            settings.
+    """
+    loops = InterSessionDetector(m, results.config).detect(results, queries)
     gt = results.ground_truth_poses
     accepted = [d for d in loops if d.accepted]
     if not accepted:
         log.warning("%s never met the map: no inter-session loop accepted", results.sequence)
-        own = build_map(results, sequence)
+        own = build_map(results)
         return JoinedSession(False, loops, _truth(loops, gt, m), results, own, None)
     session = results.slam.poses
     transform = session_transform(accepted, session, m)
@@ -312,7 +354,7 @@ def join_session(results: Results, sequence: RadarSequence, m: Map) -> JoinedSes
         loops=loops,
         true_loops=_truth(loops, gt, m),
         results=joined,
-        map=extended_map(m, results, sequence, poses, loops),
+        map=extended_map(m, results, poses, loops),
         ate_map_frame_m=ate_in_map_frame(poses, gt, m),
     )
 

@@ -8,7 +8,7 @@ from typing import Any
 
 from odometry import OdometryConfig
 from radar_slam.config import configs_dir, merge, read_yaml
-from radar_slam.datasets import DatasetConfig, open_sequence
+from radar_slam.datasets import DatasetConfig, locate_sequence, open_located
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import ConfigError
 from radar_slam.graph import GraphConfig
@@ -108,19 +108,17 @@ def open_configured(
     """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`,
     then `overrides`, e.g. one configuration of a `radar-slam batch` grid).
 
-    Each file is read once. The user's layers are checked first, so that a mistake fails before
-    any data is generated; the family, known only once the sequence is found, selects the
-    shipped overrides, and the sequence is opened again (opening is lazy) only when those change
-    its loader settings. The ground truth is then read, so that a malformed file fails before
-    any work rather than after it; a malformed scan fails when the run reads it (the first scan
-    is the run's first step: reading it here would decode it twice).
+    Each file is read once and the sequence is opened once. The user's layers are checked
+    first, so that a mistake fails before any data is generated; the sequence is then located
+    (not opened) to know its family, which selects the shipped overrides, and opened with the
+    loader settings of the whole configuration. The ground truth is then read, so that a
+    malformed file fails before any work rather than after it; a malformed scan fails when the
+    run reads it (the first scan is the run's first step: reading it here would decode it twice).
     """
     user = _user_layers(path, overrides)
-    early = _layered(None, user)  # a mistake fails before any data is generated
-    options = early.dataset.loader_options()
-    sequence = open_sequence(spec, data_root, early.dataset if options else None)
-    config = _layered(sequence.family, user)
-    if config.dataset.loader_options() != options:
-        sequence = open_sequence(spec, data_root, config.dataset)
+    _layered(None, user)  # a mistake fails before any data is generated
+    family, location = locate_sequence(spec, data_root)
+    config = _layered(family.name, user)
+    sequence = open_located(family, location, config.dataset)
     _ = sequence.ground_truth  # a malformed GT file fails now, not after the run
     return sequence, config

@@ -6,6 +6,10 @@ They are treated like ours: each must agree with the odometry path between its t
 left out of the optimisation with a warning naming it; the rest enter under the robust loop
 kernel, and one that the final pass then finds inconsistent (weight below
 `BACKEND_REJECT_WEIGHT`) is named in a warning too.
+
+Each scan is read once: the loop detector verifies a candidate against its record
+(`radar_slam.maps.keyframes.KeyframeRecorder`, as a SLAM run does), made once when the scan
+entered the place database, with the sweep twist the graph's poses imply.
 """
 
 from __future__ import annotations
@@ -15,7 +19,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
+from odometry import OdometryResult
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import RadarSlamError
 from radar_slam.g2o import G2oEdge, G2oGraph, g2o_to_pose_graph
@@ -23,7 +29,9 @@ from radar_slam.graph import LoopConstraint, PoseGraph
 from radar_slam.loops import (
     make_loop_detector,
 )
+from radar_slam.loops.config import LOOP_RAPLACE
 from radar_slam.loops.consistency import odometry_segment_covariance
+from radar_slam.maps.keyframes import KeyframeRecorder
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.pipeline.records import (
     GraphLoopsRun,
@@ -39,6 +47,7 @@ from raplace import between, wrap_angle
 
 logger = logging.getLogger(__name__)
 
+FloatArray = NDArray[np.float64]
 GROSS_CHI2 = 100.0
 """An input loop whose squared Mahalanobis distance from the odometry path between its vertices
 exceeds this (a ten-sigma error) is grossly inconsistent and left out of the optimisation."""
@@ -125,6 +134,27 @@ def warn_of_rejected_input_loops(graph: PoseGraph, loops: list[InputLoop]) -> No
             )
 
 
+def vertex_result(
+    key: int, timestamp_ns: int, pose: FloatArray, previous: OdometryResult | None
+) -> OdometryResult:
+    """A vertex of the input graph as an odometry result (what the scan records take of one:
+    key, time, pose T_world_scan (3,) and the motion from the previous vertex)."""
+    motion = np.zeros(3) if previous is None else between(previous.pose, pose)
+    return OdometryResult(
+        index=key,
+        timestamp_ns=timestamp_ns,
+        pose=np.asarray(pose, dtype=np.float64),
+        motion=np.asarray(motion, dtype=np.float64),
+        covariance=np.zeros((3, 3)),
+        keyframe_index=key if previous is None else previous.index,
+        keyframe_motion=np.asarray(motion, dtype=np.float64),
+        is_keyframe=True,
+        ok=True,
+        gap=False,
+        quality=0.0,
+    )
+
+
 def close_loops_on_graph(
     record: G2oGraph,
     sequence: RadarSequence,
@@ -148,20 +178,28 @@ def close_loops_on_graph(
         )
     graph, given = graph_of_input(record, config)
     poses = record.poses()
-    scan_of_key = {key: n for n, key in enumerate(keys)}
+    records = KeyframeRecorder(
+        config.maps, config.odometry, LOOP_RAPLACE.descriptor, keep_map=False
+    )  # keyed by vertex id
     detector = make_loop_detector(
         config.loop_closure,
-        scan_loader=lambda key: sequence[scan_of_key[key]],
+        scan_loader=records.scan,
+        on_describe=records.offer_descriptor,
         odometry=config.odometry,
     )
     start = time.perf_counter()
     loops: list[LoopConstraint] = []
+    previous: OdometryResult | None = None
     for n, key in enumerate(keys):
-        loops += detector.add(sequence[n], poses[n], key)
+        frame = sequence[n]
+        loops += detector.add(frame, poses[n], key)
+        previous = vertex_result(key, int(frame.timestamp_ns), poses[n], previous)
+        records.add(frame, None, previous)
         if progress is not None:
             accepted, rejected = detector.tally()
             progress(Progress(n + 1, len(keys), accepted, rejected, time.perf_counter() - start))
     loops += detector.finish()
+    records.finish()
     loop_ids = {
         (loop.i, loop.j): graph.add_loop(loop.i, loop.j, loop.measurement, loop.covariance)
         for loop in loops

@@ -34,11 +34,13 @@ Library code: no printing, no files (see `radar_slam.outputs` and `radar_slam.co
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 
-from odometry import Odometry, OdometryResult, PreparedScan
+from odometry import Odometry, OdometryResult, PreparedScan, Scan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
+from radar_slam.errors import RadarSlamError
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import LoopConstraint, PoseGraph
 from radar_slam.loops import (
@@ -46,7 +48,9 @@ from radar_slam.loops import (
     make_loop_detector,
 )
 from radar_slam.loops.config import CHI2_3DOF_99, LOOP_RAPLACE
+from radar_slam.loops.detector import DescriptorListener
 from radar_slam.maps.keyframes import (
+    KeyframeListener,
     KeyframeRecorder,
     KeyframeStage,
     NullKeyframeRecorder,
@@ -85,6 +89,10 @@ SETTLED_UPDATE_INTERVAL = 100
 """... and while every loop added since the last update agrees with the current estimate (a
 stretch already closed: an update would barely move it; its loops enter the graph all the
 same)."""
+LoopDetectorFactory = Callable[[Callable[[int], Scan], DescriptorListener], LoopDetectorProtocol]
+"""Makes a run's loop detector from the run's scan records: called with the loader of a
+database scan's record and the listener of the descriptors the detector makes (the
+`scan_loader` and `on_describe` of `radar_slam.loops.LoopDetector`)."""
 SETTLED_CHI2 = CHI2_3DOF_99
 """A loop agrees with the current estimate when its squared Mahalanobis distance from it
 (`PoseGraph.residual_chi2`) is below this (chi-square 99 % for 3 degrees of freedom)."""
@@ -102,11 +110,18 @@ class Pipeline:
             place recognizer or verifier); it must not have seen scans yet. Its keys are the scan
             indices; it keeps or loads its database scans itself (the configured one verifies
             them from the run's records, `radar_slam.maps.keyframes`).
+        loop_detector_factory: makes a detector to use instead of the configured one from the
+            run's scan records (e.g. one with another recognizer or verifier that verifies
+            from the records as the configured one does, reading no scan twice); not with
+            `loop_detector`.
         observer: watches the run scan by scan (e.g. the live viewer); see
             `radar_slam.pipeline.observer.PipelineObserver`.
         record_map: keep each map keyframe's descriptor and image as the run goes
             (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again);
             the database scans of the loop detector are recorded either way.
+        on_keyframe: receives each map keyframe as its record is made, with its raw scan,
+            sweep twist and descriptor (`radar_slam.maps.keyframes.KeyframeListener`; e.g. the
+            inter-session queries of `radar-slam run --map`); implies `record_map`.
     """
 
     def __init__(
@@ -118,6 +133,8 @@ class Pipeline:
         loop_detector: LoopDetectorProtocol | None = None,
         observer: PipelineObserver | None = None,
         record_map: bool = False,
+        on_keyframe: KeyframeListener | None = None,
+        loop_detector_factory: LoopDetectorFactory | None = None,
     ) -> None:
         self.sequence = sequence
         self.observer = observer
@@ -125,18 +142,23 @@ class Pipeline:
         self.frames = frame_count(sequence, max_frames)
         self.progress = progress
         self.odometry = Odometry(self.config.odometry)
-        self.record_map = record_map
-        self.keyframes = self._keyframe_stage(record_map, loop_detector is None)
-        self.loop_detector: LoopDetectorProtocol = (
-            make_loop_detector(
+        self.record_map = record_map or on_keyframe is not None
+        if loop_detector is not None and loop_detector_factory is not None:
+            raise RadarSlamError("give a loop detector or a loop detector factory, not both")
+        self.keyframes = self._keyframe_stage(self.record_map, loop_detector is None, on_keyframe)
+        self.loop_detector: LoopDetectorProtocol
+        if loop_detector is not None:
+            self.loop_detector = loop_detector
+        elif loop_detector_factory is not None:
+            scans, descriptors = self.keyframes.scan, self.keyframes.offer_descriptor
+            self.loop_detector = loop_detector_factory(scans, descriptors)
+        else:
+            self.loop_detector = make_loop_detector(
                 self.config.loop_closure,
                 scan_loader=self.keyframes.scan,
                 on_describe=self.keyframes.offer_descriptor,
                 odometry=self.config.odometry,
             )
-            if loop_detector is None
-            else loop_detector
-        )
         self.graph = PoseGraph(self.config.graph)
         self.timer = StepTimer()
         self._loop_ids: dict[tuple[int, int], int] = {}  # (query, match) -> graph loop id
@@ -199,16 +221,19 @@ class Pipeline:
             self.observer.on_finish(results)
         return results
 
-    def _keyframe_stage(self, record_map: bool, own_detector: bool) -> KeyframeStage:
+    def _keyframe_stage(
+        self, record_map: bool, own_detector: bool, on_keyframe: KeyframeListener | None
+    ) -> KeyframeStage:
         """The scan records of the run (`radar_slam.maps.keyframes`): the map keyframes when
-        `record_map`, and the loop database's scans when the run's own detector closes loops
-        (it verifies them from their records); else nothing is kept."""
+        `record_map` (each handed to `on_keyframe` too), and the loop database's scans when the
+        run's own detector closes loops (it verifies them from their records); else nothing is
+        kept."""
         cfg = self.config
         loops = own_detector and cfg.loop_closure.enabled
         if not (record_map or loops):
             return NullKeyframeRecorder()
         return KeyframeRecorder(
-            cfg.maps, cfg.odometry, LOOP_RAPLACE.descriptor, keep_map=record_map
+            cfg.maps, cfg.odometry, LOOP_RAPLACE.descriptor, record_map, on_keyframe
         )
 
     # -- per-scan steps -----------------------------------------------------------------------

@@ -386,6 +386,22 @@ class LoopDetector:
         change: FloatArray | None = None,
         span_s: float | None = None,
     ) -> dict[int, LoopStatus]:
+        """Describe the held scan, enter it in the database and verify its candidates (when the
+        throttle lets them through); the loop statuses that changed, by decision index."""
+        entry, candidates = self._enter(held, twist, change)
+        self.proposed += len(candidates)
+        if held.pose is not None and not self.throttle.due(
+            entry.path_m, [self._entries[c.key].path_m for c in candidates]
+        ):
+            return {}
+        query = KeyScan(entry.key, entry.timestamp_ns, held.scan, twist, change, span_s)
+        return self._verify_candidates(entry, query, candidates)
+
+    def _enter(
+        self, held: _Held, twist: FloatArray | None, change: FloatArray | None
+    ) -> tuple[_Entry, list[Candidate]]:
+        """The held scan's database entry and its reachable candidates, best first (queried
+        before the scan itself is added)."""
         cfg = self.config
         scan, pose, key = held.scan, held.pose, held.key
         time_s = int(scan.timestamp_ns) / NS_PER_S
@@ -419,15 +435,17 @@ class LoopDetector:
             sweep_s=sweep_s(scan),
         )
         self._entries[key] = entry
-        self.proposed += len(candidates)
+        return entry, candidates
+
+    def _verify_candidates(
+        self, entry: _Entry, query: KeyScan, candidates: list[Candidate]
+    ) -> dict[int, LoopStatus]:
+        """Verify `candidates` (at most `candidates` of them, best first) until
+        `LOOPS_PER_QUERY` pass; each verified loop goes to the consistency gate when both ends
+        have odometry poses."""
         changes: dict[int, LoopStatus] = {}
-        if pose is not None and not self.throttle.due(
-            entry.path_m, [self._entries[c.key].path_m for c in candidates]
-        ):
-            return changes
-        query = KeyScan(key, entry.timestamp_ns, scan, twist, change, span_s)
         passed = 0
-        for candidate in candidates:  # at most `candidates` (k), best first
+        for candidate in candidates:
             match = self._entries[candidate.key]
             match_scan = KeyScan(
                 match.key,
@@ -442,41 +460,44 @@ class LoopDetector:
             self._append(LoopDecision.of(query, match_scan, match.key, candidate.distance, result))
             log.debug(
                 "loop %d -> %d (distance %.3f): %s",
-                key,
+                entry.key,
                 match.key,
                 candidate.distance,
                 result.reason or "verified",
             )
-            if pose is not None:
+            if entry.pose is not None:
                 yaw = float(result.measurement[2])
                 self.throttle.verified(decision, entry.path_m, match.path_m, yaw, result.ok)
             if not result.ok:
                 continue
             passed += 1
-            if pose is None or match.pose is None:
+            if entry.pose is None or match.pose is None:
                 changes[decision] = "accepted"
                 self.gate.reasons[decision] = "accepted (no poses: consistency not checked)"
             else:
-                changes.update(
-                    self.gate.add(
-                        VerifiedLoop(
-                            decision=decision,
-                            query_key=key,
-                            match_key=match.key,
-                            measurement=result.measurement,
-                            covariance=result.covariance,
-                            query_pose=pose,
-                            match_pose=match.pose,
-                            query_path_m=entry.path_m,
-                            match_path_m=match.path_m,
-                            query_segment=entry.segment,
-                            match_segment=match.segment,
-                        )
-                    )
-                )
+                changes.update(self.gate.add(self._verified_loop(decision, entry, match, result)))
             if passed >= LOOPS_PER_QUERY:
                 break
         return changes
+
+    @staticmethod
+    def _verified_loop(
+        decision: int, entry: _Entry, match: _Entry, result: Verification
+    ) -> VerifiedLoop:
+        assert entry.pose is not None and match.pose is not None
+        return VerifiedLoop(
+            decision=decision,
+            query_key=entry.key,
+            match_key=match.key,
+            measurement=result.measurement,
+            covariance=result.covariance,
+            query_pose=entry.pose,
+            match_pose=match.pose,
+            query_path_m=entry.path_m,
+            match_path_m=match.path_m,
+            query_segment=entry.segment,
+            match_segment=match.segment,
+        )
 
     def _verify(self, entry: _Entry, match: _Entry, query: KeyScan, scan: KeyScan) -> Verification:
         """Verify a candidate: from its prediction when it lies on a closed stretch (in full

@@ -1,10 +1,5 @@
-"""Settings of the phase-correlation odometry: what a user tunes for a sensor or a vehicle.
-
-`OdometryConfig` is the `odometry:` section of a radar-slam config (`raplace.config_io.merge`
-applies YAML overrides to it; unknown keys are errors, removed keys say what replaced them).
-Everything else the method needs is a named constant beside the code that uses it, with its
-reason. The dataclasses are frozen and hashable, so derived geometry can be cached per config.
-"""
+"""The `odometry:` config section: what a user tunes for a sensor or a vehicle (everything else
+is a named constant beside its code). Frozen and hashable: derived geometry is cached per config."""
 
 from __future__ import annotations
 
@@ -46,12 +41,8 @@ class PreprocessConfig:
 
 @dataclass(frozen=True)
 class LevelConfig:
-    """One Cartesian image level (its side in pixels is a constant of the level,
-    `odometry.registration.COARSE_SIZE_PX` and `FINE_SIZE_PX`).
-
-    Attributes:
-        cell_m: pixel size [m].
-    """
+    """One Cartesian image level: `cell_m`, its pixel size [m] (its side in pixels is a constant,
+    `odometry.registration.COARSE_SIZE_PX` and `FINE_SIZE_PX`)."""
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
         "size_px": replaced_by_constant("odometry.registration.COARSE_SIZE_PX, FINE_SIZE_PX"),
@@ -75,14 +66,14 @@ class QualityConfig:
     """
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        "max_prediction_error_m": replaced_by_constant("odometry.recovery.PREDICTION_TOLERANCE_M"),
+        "max_prediction_error_m": replaced_by_constant("odometry.velocity.PREDICTION_TOLERANCE_M"),
         "max_prediction_error_deg": replaced_by_constant(
-            "odometry.recovery.PREDICTION_TOLERANCE_DEG"
+            "odometry.velocity.PREDICTION_TOLERANCE_DEG"
         ),
         "min_sigma_xy_m": replaced_by_constant("odometry.registration.MIN_SIGMA_XY_M"),
         "min_sigma_yaw_deg": replaced_by_constant("odometry.registration.MIN_SIGMA_YAW_DEG"),
-        "velocity_lag_fraction": replaced_by_constant("odometry.uncertainty.VELOCITY_LAG_FRACTION"),
-        "deskew_error_fraction": replaced_by_constant("odometry.uncertainty.DESKEW_ERROR_FRACTION"),
+        "velocity_lag_fraction": replaced_by_constant("odometry.odometry.VELOCITY_LAG_FRACTION"),
+        "deskew_error_fraction": replaced_by_constant("odometry.odometry.DESKEW_ERROR_FRACTION"),
         "sigma_yaw_deg_per_deg": "removed: rotation terms in turns cost SLAM accuracy",
         "deskew_yaw_error_fraction": "removed: rotation terms in turns cost SLAM accuracy",
     }
@@ -123,14 +114,6 @@ class KeyframeConfig:
         checks.at_least("max_frames", self.max_frames, 1)
 
 
-def _coarse() -> LevelConfig:
-    return LevelConfig(cell_m=0.8)
-
-
-def _fine() -> LevelConfig:
-    return LevelConfig(cell_m=0.25)
-
-
 @dataclass(frozen=True)
 class OdometryConfig:
     """The odometry stage's settings (the `odometry` section of a radar-slam config).
@@ -146,8 +129,8 @@ class OdometryConfig:
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
-    coarse: LevelConfig = field(default_factory=_coarse)
-    fine: LevelConfig = field(default_factory=_fine)
+    coarse: LevelConfig = field(default_factory=lambda: LevelConfig(cell_m=0.8))
+    fine: LevelConfig = field(default_factory=lambda: LevelConfig(cell_m=0.25))
     quality: QualityConfig = field(default_factory=QualityConfig)
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
     deskew: bool = True

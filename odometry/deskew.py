@@ -1,11 +1,6 @@
-"""Motion-distortion correction for a spinning radar under constant velocity, and SE(2) twists.
-
-Each azimuth of a sweep (about 250 ms) sees the world from a different pose: at time tau after
-the reference time, to first order S(tau) = (vx tau, vy tau, w tau); a point q was measured at
-p = S(tau)^-1 q. `sampling_maps` folds this into the backward warp (the polar bin and row where
-the scan recorded each Cartesian pixel), so one remap yields the de-skewed image: range exact
-for the displacement, bearing to second order; below a centimetre beyond 10 m at 10 m/s.
-"""
+"""Motion-distortion correction of a spinning radar under constant velocity, folded into the
+backward warp (docs/method.md: range exact for the displacement, bearing to second order, under a
+centimetre beyond 10 m at 10 m/s), and the SE(2) exponential and logarithm of body twists."""
 
 from __future__ import annotations
 
@@ -55,25 +50,11 @@ def sampling_maps(
     rows = np.empty(shape, dtype=np.float32)
     f32 = np.float32
     _maps_kernel(
-        np.ascontiguousarray(x_m, dtype=np.float32),
-        np.ascontiguousarray(y_m, dtype=np.float32),
-        np.ascontiguousarray(range_m, dtype=np.float32),
-        np.ascontiguousarray(bearing_rad, dtype=np.float32),
-        f32(1.0 / azimuth_step_rad),
-        f32(wrap_angle(first_azimuth_rad + rotation_rad)),
-        f32(n_azimuths),
-        f32(1.0 / n_azimuths),
-        f32(1.0 / bin_size_m),
-        deskew,
-        f32(t0),
-        f32(t1),
-        f32(wx),
-        f32(wy),
-        f32(wx * wx + wy * wy),
-        f32(yaw_rate),
-        bins,
-        rows,
-    )
+        *(np.ascontiguousarray(a, dtype=np.float32) for a in (x_m, y_m, range_m, bearing_rad)),
+        f32(1.0 / azimuth_step_rad), f32(wrap_angle(first_azimuth_rad + rotation_rad)),
+        f32(n_azimuths), f32(1.0 / n_azimuths), f32(1.0 / bin_size_m), deskew, f32(t0), f32(t1),
+        f32(wx), f32(wy), f32(wx * wx + wy * wy), f32(yaw_rate), bins, rows,
+    )  # fmt: skip
     return bins, rows
 
 
@@ -84,9 +65,7 @@ def _maps_kernel(
 ):  # type: ignore[no-untyped-def]  # fmt: skip
     """The maps of `sampling_maps` pixel by pixel, in float32. Rows are wrapped by floor (modulo
     is slow on float32); -0.0 or exactly n are valid rows of the seam-wrapped image."""
-    half = np.float32(0.5)
-    two = np.float32(2.0)
-    zero = np.float32(0.0)
+    half, two, zero = np.float32(0.5), np.float32(2.0), np.float32(0.0)
     min_r2 = np.float32(MIN_RANGE_SQUARED_M2)
     for i in range(x_m.shape[0]):
         for j in range(x_m.shape[1]):
@@ -97,8 +76,7 @@ def _maps_kernel(
                 bins[i, j] = r * inv_bin - half
                 rows[i, j] = row
                 continue
-            x = x_m[i, j]
-            y = y_m[i, j]
+            x, y = x_m[i, j], y_m[i, j]
             tau = row * t1 + t0
             along = x * wx + y * wy
             across = x * wy - y * wx
@@ -113,9 +91,7 @@ def _maps_kernel(
             denominator = r2 - along * tau
             if not denominator >= min_r2:
                 denominator = min_r2
-            turn = (across / denominator + yaw_rate) * tau
-            turn = turn * scale
-            moved_row = row - turn
+            moved_row = row - (across / denominator + yaw_rate) * tau * scale
             rows[i, j] = moved_row - np.floor(moved_row * inv_n) * n
 
 

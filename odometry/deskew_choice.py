@@ -1,12 +1,6 @@
-"""Which de-skew a scan keeps: the re-renderings `Odometry` tries, and the yaw-rate search.
-
-Each step renders the scan again and registers it again, seeded with the estimate so far; the
-new rendering is kept where its peak is stronger or the registration measured another velocity:
-`with_trend` (a tightening turn), `redeskewed` (hard braking, a curvature step), `weak_searched`
-(a collapsed peak: the yaw rate searched by peak quality, which peaks where the scan's de-skew
-matches the reference image's; also for loop queries, `searched_registration`), `refreshed` (a
-new keyframe whose de-skew is stale).
-"""
+"""Which de-skew a scan keeps (steps 3-4 of `odometry.odometry`): each alternative is rendered and
+registered again, seeded with the estimate so far, and kept where its peak is stronger or the
+registration measured another velocity; the yaw-rate search also serves loop queries."""
 
 from __future__ import annotations
 
@@ -16,8 +10,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import twist_from_motion
-from odometry.history import ScanNode
 from odometry.registration import MotionEstimate, PreparedScan, register, register_images
 from odometry.velocity import (
     REDESKEW_MPS,
@@ -27,11 +19,11 @@ from odometry.velocity import (
     close_twists,
     image_time_ns,
 )
-from raplace.se2 import between, compose, inverse
+from raplace.se2 import inverse
 
 FloatArray = NDArray[np.float64]
 Register = Callable[..., MotionEstimate]
-"""`registration.register_images` (passed in so that callers can count the registrations)."""
+"""`registration.register_images` (passed in so that callers can count registrations)."""
 Rendered = tuple[PreparedScan, MotionEstimate]
 """A rendering of a scan and its registration against the reference."""
 YAW_TREND_GAIN = 1.0
@@ -61,53 +53,50 @@ def expected_twist(
 
 
 def with_trend(
-    reference: ScanNode,
+    reference: PreparedScan,
     scan: PreparedScan,
     estimate: MotionEstimate,
-    velocity: Velocity | None,
+    velocity: Velocity,
     cfg: OdometryConfig,
     register: Register = register_images,
 ) -> Rendered:
     """`scan` and its estimate, or the scan de-skewed with the yaw-rate trend when that
-    correlates more strongly (not tried when the trend hardly changes the twist)."""
-    if scan.twist is None or velocity is None:
+    correlates more strongly (a tightening turn; not tried when the trend hardly changes the
+    twist)."""
+    if scan.twist is None:
         return scan, estimate
     trend = expected_twist(velocity, image_time_ns(scan), cfg)
     if close_twists(trend, scan.twist):
         return scan, estimate
     alternative = PreparedScan(scan.polar, trend, cfg)
-    other = register(reference.scan, alternative, cfg, hint=estimate.motion)
+    other = register(reference, alternative, cfg, hint=estimate.motion)
     if other.ok and other.quality > estimate.quality:
         return alternative, other
     return scan, estimate
 
 
 def redeskewed(
-    reference: ScanNode,
-    base: ScanNode,
+    reference: PreparedScan,
     rendered: Rendered,
-    interval_s: float,
-    velocity: Velocity | None,
+    measured: FloatArray,
     cfg: OdometryConfig,
     register: Register = register_images,
 ) -> Rendered:
-    """`rendered`, or the scan re-rendered at the velocity its registration measures since
-    `base` (`interval_s` [s] before) when that is far from the one it was de-skewed with."""
+    """`rendered`, or the scan re-rendered at the twist `measured` (3,) by its registration when
+    that is far from the one it was de-skewed with (hard braking, a curvature step)."""
     scan, estimate = rendered
-    if scan.twist is None or velocity is None or interval_s <= 0:
+    if scan.twist is None:
         return rendered
-    image_pose = compose(reference.image_pose, estimate.motion)
-    measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
     measured = bounded_twist(measured, cfg)
     if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
         return rendered
     again = PreparedScan(scan.polar, measured, cfg)
-    redone = register(reference.scan, again, cfg, hint=estimate.motion)
+    redone = register(reference, again, cfg, hint=estimate.motion)
     return (again, redone) if redone.ok else rendered
 
 
 def weak_searched(
-    reference: ScanNode,
+    reference: PreparedScan,
     rendered: Rendered,
     last_quality: float,
     cfg: OdometryConfig,
@@ -122,12 +111,12 @@ def weak_searched(
         or estimate.quality >= WEAK_PEAK_FRACTION * last_quality
     ):
         return rendered
-    return searched(reference.scan, scan, estimate, cfg, register)
+    return searched(reference, scan, estimate, cfg, register)
 
 
-def refreshed(scan: PreparedScan, velocity: Velocity | None, cfg: OdometryConfig) -> PreparedScan:
+def refreshed(scan: PreparedScan, velocity: Velocity, cfg: OdometryConfig) -> PreparedScan:
     """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans)."""
-    if velocity is None or not cfg.deskew or scan.polar.timing is None:
+    if not cfg.deskew or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
     if scan.twist is not None and close_twists(new, scan.twist):
@@ -156,8 +145,9 @@ def searched(
     register: Register,
 ) -> Rendered:
     """`scan` and its registration `estimate` against `reference`, or the scan de-skewed at the
-    yaw rate -+ `HALF_WIDTH_DPS` or the parabola's vertex (2-3 registrations, seeded with
-    `estimate`) whose peak is stronger by more than `MIN_GAIN`."""
+    yaw rate -+ `HALF_WIDTH_DPS` or the parabola's vertex (2-3 registrations seeded with
+    `estimate`) whose peak is stronger by more than `MIN_GAIN` (the peak quality peaks where the
+    scan's de-skew matches the reference image's)."""
     assert scan.twist is not None
     base_twist = scan.twist
 

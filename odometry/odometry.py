@@ -8,7 +8,7 @@
 2. Register its image against the keyframe's (`registration.register_images`, coarse and fine
    levels counting as one registration): globally, rotation over the full circle and translation
    over the whole coarse image. When that fails, or its peak is not far above the failure
-   threshold and it lands off the constant-velocity prediction (`recovery.agrees`), register
+   threshold and it lands off the constant-velocity prediction (`velocity.agrees`), register
    again seeded with the prediction; the stronger peak wins. The prediction is a hint, never a
    veto, so a strong registration ends any run of failures.
 3. Measure the velocity between the last two image poses. When it is far from the one the scan
@@ -20,41 +20,43 @@
    (a de-skew far off) has its de-skew yaw rate searched (`deskew_choice.weak_searched`).
 5. The pose at the scan's reference time (`OdometryResult.pose`) is its image pose moved by that
    velocity; the move's error does not accumulate. The covariance is the correlation peak's plus
-   the terms the peak cannot show (`uncertainty`).
+   the terms the peak cannot show (`conversion_covariance`, `deskew_covariance`).
 6. The scan becomes the keyframe when it has moved or turned far enough, when the peak weakens
    (overlap fading) or after `max_frames` scans.
 
 When the keyframe cannot be registered the last registered scan is tried (it becomes the
 keyframe); if that fails too the pose is the prediction, flagged as a gap (`ok=False`,
 `gap=True`, a large covariance), and the keyframe stays for the next scan's global search. Only
-the images fail a registration; a motion faster than a vehicle moves, or one across a gap that
-lands off the prediction, is kept but never becomes the velocity (`recovery`). Every scan counts
-its registrations (`OdometryResult.registrations`).
+the images fail a registration; a motion faster than a vehicle moves (`velocity.plausible_twist`),
+or one across a gap that lands off the prediction, is kept but never becomes the velocity nor
+re-renders the scan: the velocity from before is kept until two registered scans in a row
+measure it again. Every scan counts its registrations (`OdometryResult.registrations`).
 """
 
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, deskew_choice, recovery
+from odometry import OdometryError, deskew_choice
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.history import OdometryResult, OdometryState, ScanNode
-from odometry.preprocess import preprocess_polar
+from odometry.preprocess import Scan, preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
-from odometry.scan import Scan
-from odometry.uncertainty import conversion_covariance, deskew_covariance, factor_covariance
 from odometry.velocity import (
     Velocity,
+    agrees,
     bounded_twist,
     image_interval_s,
     image_time_ns,
+    plausible_twist,
     pose_at_reference,
 )
-from raplace.se2 import between, compose
+from raplace.se2 import between, compose, rotate_covariance
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
@@ -72,6 +74,76 @@ UNAMBIGUOUS_QUALITY_FACTOR = 5.0
 """A global registration whose peak is at least this multiple of `quality.min_peak_quality` is
 kept without a seeded one even off the prediction: the seeded search found the same motion there
 (docs/decisions.md)."""
+VELOCITY_LAG_FRACTION = 0.25
+"""The error of the velocity that moves a pose to its reference time: this fraction of its last
+change, per axis (it lags an accelerating or turning vehicle)."""
+DESKEW_ERROR_FRACTION = 1.25
+"""A lagging de-skew velocity bends a scan by about its last change times half a sweep; this
+multiple of the bend is the translation standard deviation (the change itself lags)."""
+
+
+@dataclass(frozen=True)
+class OdometryResult:
+    """The odometry's output for one scan.
+
+    Attributes:
+        index: position of the scan in the sequence registered so far (0-based).
+        timestamp_ns: the scan's reference time [ns] (the time `pose` refers to).
+        pose: (3,) T_world_radar (x, y [m], yaw [rad]) at `timestamp_ns`; the world frame is the
+            first scan's radar frame moved to `start_pose`.
+        motion: (3,) this scan's pose in the previous scan's frame (zeros for the first scan).
+        covariance: (3, 3) covariance [m^2, m rad, rad^2] (x, y, yaw) of `keyframe_motion`, in
+            the previous scan's axes (so that it also serves, conservatively, for `motion`).
+        keyframe_index: index of the scan it was registered against (the keyframe, or the last
+            registered scan when the keyframe failed; itself for the first; the keyframe for a
+            gap).
+        keyframe_motion: (3,) this scan's pose in that scan's frame.
+        is_keyframe: the scan is the keyframe for the scans that follow.
+        ok: the registration succeeded.
+        gap: the pose is a constant-velocity prediction covering a failed registration.
+        quality: peak-to-noise ratio of the translation peak (0 for the first scan or a gap).
+        reason: why the registration failed ("" when ok).
+        registrations: image registrations (`registration.register_images`) run for this scan.
+    """
+
+    index: int
+    timestamp_ns: int
+    pose: FloatArray
+    motion: FloatArray
+    covariance: FloatArray
+    keyframe_index: int
+    keyframe_motion: FloatArray
+    is_keyframe: bool
+    ok: bool
+    gap: bool
+    quality: float
+    reason: str = ""
+    registrations: int = 0
+
+
+@dataclass
+class ScanNode:
+    """A scan: its pose at its reference time and the pose of its image frame (`image_pose`,
+    world), which the registrations chain (a gap's are the prediction); `conversion_covariance`
+    (own axes) is what moving the image pose to the reference time adds to `pose`."""
+
+    index: int
+    pose: FloatArray
+    image_pose: FloatArray
+    scan: PreparedScan
+    frames: int = 0
+    gap: bool = False
+    conversion_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
+
+
+@dataclass
+class OdometryState:
+    keyframe: ScanNode | None = None
+    previous: ScanNode | None = None
+    last_registered: ScanNode | None = None  # the last scan that was not a gap
+    velocity: Velocity | None = None
+    history: list[OdometryResult] = field(default_factory=list)
+    registrations: int = 0  # image registrations run for the scan being registered
 
 
 class Odometry:
@@ -102,11 +174,6 @@ class Odometry:
     def poses(self) -> FloatArray:
         """(N, 3) T_world_radar of every registered scan (as in `results`)."""
         return np.array([r.pose for r in self.results]).reshape(-1, 3)
-
-    @property
-    def timestamps_ns(self) -> NDArray[np.int64]:
-        """(N,) reference times of the registered scans [ns]."""
-        return np.array([r.timestamp_ns for r in self.results], dtype=np.int64)
 
     @property
     def gaps(self) -> list[int]:
@@ -147,10 +214,6 @@ class Odometry:
         None before the first scan."""
         previous = self._state.previous
         return None if previous is None else previous.scan
-
-    def reset(self) -> None:
-        """Forget every scan (the next one starts again at `start_pose`)."""
-        self._state = OdometryState()
 
     def register(self, frame: Scan) -> OdometryResult:
         """Register the next scan; returns its result (`motion` from the previous scan's pose).
@@ -229,7 +292,7 @@ class Odometry:
             return estimate
         expected = between(reference.image_pose, predicted)
         strong = estimate.quality >= UNAMBIGUOUS_QUALITY_FACTOR * cfg.quality.min_peak_quality
-        if estimate.ok and (strong or recovery.agrees(estimate.motion, expected, cfg)):
+        if estimate.ok and (strong or agrees(estimate.motion, expected)):
             return estimate
         seeded = self._register_images(reference.scan, scan, cfg, hint=expected)
         if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
@@ -237,99 +300,68 @@ class Odometry:
         return estimate
 
     def _accept(
-        self,
-        index: int,
-        scan: PreparedScan,
-        reference: ScanNode,
-        estimate: MotionEstimate,
-        dt_s: float,
+        self, index: int, scan: PreparedScan, ref: ScanNode, estimate: MotionEstimate, dt_s: float
     ) -> OdometryResult:
-        """Place `scan` by its registration against `reference`; update the velocity and the
-        keyframe."""
-        state = self._state
+        """Place `scan` by its registration against `ref`; update the velocity and keyframe."""
+        state, cfg = self._state, self.config
         previous, keyframe = state.previous, state.keyframe
         assert previous is not None and keyframe is not None
         if state.velocity is None:
-            self._place_first_images(reference, scan, estimate.motion)
-        # A gap's pose is a guess: measure the velocity from the reference instead.
-        base = reference if previous.gap else previous
+            self._place_first_images(ref, scan, estimate.motion)
+        base = ref if previous.gap else previous  # a gap's pose is a guess
         interval_s = image_interval_s(
             base.scan, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
-        image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
+        image_pose, change = compose(ref.image_pose, estimate.motion), np.zeros(3)
         # A motion faster than a vehicle moves, or across a gap that hid more than the
-        # prediction allows, is no velocity: the one from before is kept (recovery.py).
+        # prediction allows, is no velocity: the one from before is kept.
         measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
-        smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
-        if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
-            scan, estimate = self._rerendered(reference, base, scan, estimate, interval_s)
-            image_pose = compose(reference.image_pose, estimate.motion)
+        smooth = predicted is None or agrees(image_pose, predicted)
+        if state.velocity is None or (smooth and plausible_twist(measured, cfg)):
+            scan, estimate = self._rerendered(ref, scan, estimate, measured)
+            image_pose = compose(ref.image_pose, estimate.motion)
             change = self._update_velocity(base, scan, image_pose, interval_s)
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
         assert state.velocity is not None
         twist = self._velocity_at((image_time_ns(scan) + scan.timestamp_ns) // 2)
         pose = pose_at_reference(image_pose, twist, scan.image_time_s)
-        conversion = conversion_covariance(
-            estimate.covariance,
-            change,
-            scan.image_time_s,
-            image_interval_s(previous.scan, scan, dt_s),
-        )
+        step_s = image_interval_s(previous.scan, scan, dt_s)
+        conversion = conversion_covariance(estimate.covariance, change, scan.image_time_s, step_s)
         node = ScanNode(index, pose, image_pose, scan, conversion_covariance=conversion)
-        covariance = factor_covariance(
-            estimate.covariance + deskew_covariance(change, scan),
-            reference.pose,
-            reference.image_pose,
-            pose,
-            conversion,
-            float(between(previous.pose, reference.pose)[2]),
-            previous.conversion_covariance,
-        )
-        new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
+        registration = estimate.covariance + deskew_covariance(change, scan)
+        covariance = factor_covariance(registration, ref, node, previous)
+        new_keyframe = ref is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = deskew_choice.refreshed(node.scan, state.velocity, self.config)
+            node.scan = deskew_choice.refreshed(node.scan, state.velocity, cfg)
             state.keyframe = node
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = deskew_choice.refreshed(keyframe.scan, state.velocity, self.config)
+                keyframe.scan = deskew_choice.refreshed(keyframe.scan, state.velocity, cfg)
         state.previous = state.last_registered = node
         motion = between(previous.pose, pose)
-        return self._record(node, motion, covariance, reference, new_keyframe, estimate.quality)
+        return self._record(node, motion, covariance, ref, new_keyframe, estimate.quality)
 
     def _rerendered(
-        self,
-        reference: ScanNode,
-        base: ScanNode,
-        scan: PreparedScan,
-        estimate: MotionEstimate,
-        interval_s: float,
+        self, ref: ScanNode, scan: PreparedScan, estimate: MotionEstimate, measured: FloatArray
     ) -> tuple[PreparedScan, MotionEstimate]:
-        """The scan's de-skew after steps 3 and 4 of the module docstring (the velocity measured
-        since `base`, `interval_s` [s] before)."""
+        """The scan's de-skew after steps 3 and 4 of the module docstring (`measured` (3,): the
+        twist its registration measures)."""
         velocity, cfg, register = self._state.velocity, self.config, self._register_images
-        rendered = deskew_choice.redeskewed(
-            reference, base, (scan, estimate), interval_s, velocity, cfg, register
-        )
-        if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
-            rendered = deskew_choice.with_trend(reference, scan, estimate, velocity, cfg, register)
         if velocity is None:
-            return rendered
+            return scan, estimate
+        rendered = deskew_choice.redeskewed(ref.scan, (scan, estimate), measured, cfg, register)
+        if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
+            rendered = deskew_choice.with_trend(ref.scan, scan, estimate, velocity, cfg, register)
         last_quality = self._state.history[-1].quality
-        return deskew_choice.weak_searched(reference, rendered, last_quality, cfg, register)
+        return deskew_choice.weak_searched(ref.scan, rendered, last_quality, cfg, register)
 
-    def _register_images(
-        self,
-        reference: PreparedScan,
-        scan: PreparedScan,
-        cfg: OdometryConfig,
-        hint: FloatArray | None = None,
-    ) -> MotionEstimate:
+    def _register_images(self, *args: Any, **kwargs: Any) -> MotionEstimate:
         """`registration.register_images`, counted in the scan's result (`registrations`)."""
         self._state.registrations += 1
-        return register_images(reference, scan, cfg, hint)
+        return register_images(*args, **kwargs)
 
     def _place_first_images(
         self, reference: ScanNode, scan: PreparedScan, image_motion: FloatArray
@@ -372,18 +404,14 @@ class Odometry:
         )
 
     def _gap(
-        self,
-        index: int,
-        scan: PreparedScan,
-        predicted: FloatArray | None,
-        failed: MotionEstimate,
+        self, index: int, scan: PreparedScan, predicted: FloatArray | None, failed: MotionEstimate
     ) -> OdometryResult:
         """Cover a failed registration with the constant-velocity prediction (standing still
         before any velocity is known); the keyframe stays."""
         state = self._state
         previous, keyframe = state.previous, state.keyframe
         assert previous is not None and keyframe is not None
-        if predicted is None or state.velocity is None:
+        if predicted is None:  # no velocity yet
             pose, image_pose = previous.pose.copy(), previous.pose.copy()
         else:
             twist = self._velocity_at((image_time_ns(scan) + scan.timestamp_ns) // 2)
@@ -425,3 +453,43 @@ class Odometry:
         )
         self._state.history.append(result)
         return result
+
+
+def conversion_covariance(
+    registration_covariance: FloatArray,
+    velocity_change: ArrayLike,
+    image_time_s: float,
+    interval_s: float,
+) -> FloatArray:
+    """(3, 3) covariance (scan axes) of moving a scan's image pose by the velocity over
+    `image_time_s` [s]: the velocity is two image poses `interval_s` [s] apart (twice
+    `registration_covariance` over the interval squared) lagging by `VELOCITY_LAG_FRACTION` of
+    its last change `velocity_change` (3,) [m/s, m/s, rad/s]."""
+    if image_time_s == 0.0 or interval_s <= 0:
+        return np.zeros((3, 3))
+    lag = VELOCITY_LAG_FRACTION * np.asarray(velocity_change, dtype=float)
+    velocity_covariance = 2.0 * registration_covariance / interval_s**2 + np.diag(lag * lag)
+    return image_time_s**2 * velocity_covariance
+
+
+def deskew_covariance(velocity_change: ArrayLike, scan: PreparedScan) -> FloatArray:
+    """(3, 3) isotropic translation covariance [m^2] of the bend of a scan de-skewed with a
+    velocity lagging by its last change `velocity_change` (3,) [m/s, m/s, rad/s]."""
+    timing = scan.polar.timing
+    half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
+    bend = half_sweep_s * np.abs(np.asarray(velocity_change, dtype=float))
+    sigma_xy_sq = DESKEW_ERROR_FRACTION**2 * float(bend[0] ** 2 + bend[1] ** 2)
+    return np.diag([sigma_xy_sq, sigma_xy_sq, 0.0])
+
+
+def factor_covariance(
+    registration: FloatArray, reference: ScanNode, node: ScanNode, previous: ScanNode
+) -> FloatArray:
+    """(3, 3) covariance (`previous`'s axes) of the factor from `previous` to `node`: the
+    `registration` against `reference` (axes of its image pose) plus both scans'
+    `conversion_covariance` (own axes)."""
+    in_reference_axes = rotate_covariance(
+        registration, float(between(reference.pose, reference.image_pose)[2])
+    ) + rotate_covariance(node.conversion_covariance, float(between(reference.pose, node.pose)[2]))
+    previous_turn = float(between(previous.pose, reference.pose)[2])
+    return rotate_covariance(in_reference_axes, previous_turn) + previous.conversion_covariance

@@ -1,16 +1,6 @@
-"""Phase correlation on packed spectra, with a smooth, sub-pixel-locatable peak and its quality.
-
-Packed spectra are OpenCV's CCS layout (`cv2.dft` of a real (H, W) float32 image, H and W even):
-columns 1 .. W - 2 hold (Re, Im) pairs of the column frequencies 1 .. W / 2 - 1; columns 0 and
-W - 1 hold the real values of row frequencies 0 (row 0) and H / 2 (row H - 1) and the (Re, Im)
-pairs of row frequencies 1 .. H / 2 - 1 in rows (2 k - 1, 2 k). Half the memory of a complex
-spectrum.
-
-The normalised cross-power spectrum is multiplied by a Gaussian low-pass, so the peak of a pure
-shift is a sampled Gaussian whose log a quadratic fit on its 3 x 3 neighbourhood locates to a
-small fraction of a pixel. `correlate(f_ref, f_mov)` peaks at d (rows, cols) when
-mov(p) = ref(p - d).
-"""
+"""Phase correlation on packed spectra (OpenCV's CCS layout, `pack`): the whitened cross-power
+spectrum times a Gaussian low-pass, so that a shift's peak is a sampled Gaussian located to a
+small fraction of a pixel by a quadratic fit of its log (docs/method.md)."""
 
 from __future__ import annotations
 
@@ -53,8 +43,10 @@ def inverse(packed: PackedSpectrum) -> FloatImage:
 
 
 def pack(half: NDArray[np.complexfloating]) -> PackedSpectrum:
-    """The packed spectrum (H, W) of a half spectrum (H, W // 2 + 1) (`numpy.fft.rfft2`'s); the
-    imaginary parts at the four real positions are dropped."""
+    """The packed spectrum (H, W) of a half spectrum (H, W // 2 + 1) (`numpy.fft.rfft2`'s):
+    columns 1 .. W - 2 hold (Re, Im) of column frequencies 1 .. W / 2 - 1; columns 0 and W - 1
+    the real values of row frequencies 0 (row 0) and H / 2 (row H - 1) of column frequencies 0
+    and W / 2, and (Re, Im) of row frequencies 1 .. H / 2 - 1 in rows (2 k - 1, 2 k)."""
     h, w = half.shape[0], 2 * (half.shape[1] - 1)
     out = np.empty((h, w), dtype=np.float32)
     out[:, 1 : w - 1 : 2] = half[:, 1 : w // 2].real
@@ -128,8 +120,8 @@ def correlate(
     half_turn: bool = False,
 ) -> FloatImage:
     """Phase-correlation surface (H, W) float32 of the packed spectra of two images of `shape`
-    (the moved one turned by pi with `half_turn`, square images only); peak width
-    `smoothing_px` [pixels]."""
+    (the moved one turned by pi with `half_turn`, square images only), peaking at d (rows, cols)
+    when mov(p) = ref(p - d); peak width `smoothing_px` [pixels]."""
     weights = _packed_lowpass(shape, float(smoothing_px))
     ramp = _packed_half_turn_ramp(shape[0]) if half_turn else weights
     cross = np.empty(shape, dtype=np.float32)

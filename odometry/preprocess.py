@@ -1,17 +1,13 @@
-"""Scan conditioning: polar filtering, then windowed Cartesian images for phase correlation.
-
-`preprocess_polar` resamples the rows onto a uniform sweep when needed, averages range bins down
-to about `bin_size_m` (speckle), subtracts each range bin's median over azimuths (ring noise:
-bands that do not move with the vehicle pull phase correlation toward zero motion), an optional
-per-azimuth noise floor, and zeroes the saturated near range. `render_cartesian` makes the
-backward-warped, rotated and de-skewed image of a `CartesianLevel` times its apodisation window.
-"""
+"""The radar scan (`Scan`, `RadarFrame`) and its conditioning: polar filtering (uniform sweep,
+bins averaged, ring noise and near range removed), then the windowed, rotated and de-skewed
+Cartesian images that phase correlation takes (docs/method.md)."""
 
 from __future__ import annotations
 
 import functools
 import math
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numba
 import numpy as np
@@ -20,7 +16,6 @@ from numpy.typing import NDArray
 from odometry import OdometryError
 from odometry.config import PreprocessConfig
 from odometry.deskew import sampling_maps
-from odometry.scan import Scan
 from raplace.units import NS_PER_S
 from raplace.warp import CartesianGrid, remap, remap_wrapped
 
@@ -33,6 +28,61 @@ MAX_UINT16_SUM_FACTOR = 257
 """Up to this many uint8 bins add up in a uint16."""
 
 FloatImage = NDArray[np.float32]
+
+
+@runtime_checkable
+class Scan(Protocol):
+    """One radar sweep (any object with these attributes).
+
+    Attributes:
+        timestamp_ns: reference time of the scan [ns]: the time its pose refers to.
+        polar: (n_azimuths, n_bins) uint8 intensities, one row per azimuth.
+        azimuths_rad: (n_azimuths,) azimuth of each row [rad], counter-clockwise from +x
+            (forward) in the sensor frame x-forward, y-left; bin k of row i lies at range
+            (k + 0.5) * range_resolution_m along azimuths_rad[i].
+        range_resolution_m: size of one range bin [m].
+        sensor: sensor / dataset name (informational).
+        azimuth_times_ns: (n_azimuths,) acquisition time of each row [ns], or None when unknown
+            (then the scan cannot be de-skewed).
+    """
+
+    # Read-only properties so that frozen dataclasses (RadarFrame) match under mypy too.
+    @property
+    def timestamp_ns(self) -> int: ...
+    @property
+    def polar(self) -> NDArray[np.uint8]: ...
+    @property
+    def azimuths_rad(self) -> NDArray[np.float64]: ...
+    @property
+    def range_resolution_m(self) -> float: ...
+    @property
+    def sensor(self) -> str: ...
+    @property
+    def azimuth_times_ns(self) -> NDArray[np.int64] | None: ...
+
+
+@dataclass(frozen=True)
+class RadarFrame:
+    """One radar sweep: the concrete `Scan` (see `Scan` for the attributes)."""
+
+    timestamp_ns: int
+    polar: NDArray[np.uint8]
+    azimuths_rad: NDArray[np.float64]
+    range_resolution_m: float
+    sensor: str
+    azimuth_times_ns: NDArray[np.int64] | None = None
+
+    @property
+    def n_azimuths(self) -> int:
+        return int(self.polar.shape[0])
+
+    @property
+    def n_bins(self) -> int:
+        return int(self.polar.shape[1])
+
+    @property
+    def max_range_m(self) -> float:
+        return self.n_bins * self.range_resolution_m
 
 
 @dataclass(frozen=True)
@@ -87,18 +137,15 @@ class PolarScan:
 @dataclass(frozen=True)
 class CartesianLevel:
     """Per-pixel (x, y, range [m], bearing [rad] CCW from +x) from the sensor at the centre of
-    a `raplace.warp` grid, and its apodisation window; arrays (size_px, size_px) float32."""
+    a `raplace.warp` grid of `cell_m` [m] pixels, and its apodisation window; arrays (size_px,
+    size_px) float32."""
 
-    grid: CartesianGrid
+    cell_m: float
     x_m: FloatImage
     y_m: FloatImage
     range_m: FloatImage
     bearing_rad: FloatImage
     window: FloatImage
-
-    @property
-    def cell_m(self) -> float:
-        return self.grid.cell_m
 
 
 TAPER_FRACTION = 0.3
@@ -110,10 +157,6 @@ image border out of the spectrum and most of the scene in)."""
 def cartesian_level(cell_m: float, size_px: int) -> CartesianLevel:
     """The level of `size_px` (even) pixels of `cell_m` [m] (cached); its window is a radial
     Tukey window (`TAPER_FRACTION`), 0 in the corners."""
-    if size_px < 8 or size_px % 2 or cell_m <= 0:
-        raise OdometryError(
-            f"a level needs an even size_px >= 8 and cell_m > 0, got {size_px}, {cell_m}"
-        )
     grid = CartesianGrid(cell_m=cell_m, size_px=size_px)
     x, y = grid.pixel_centres()
     rng = np.hypot(x, y)
@@ -122,7 +165,7 @@ def cartesian_level(cell_m: float, size_px: int) -> CartesianLevel:
     fall = np.clip((rng - inner) / (outer - inner), 0.0, 1.0)
     window = 0.5 * (1.0 + np.cos(np.pi * fall))
     return CartesianLevel(
-        grid=grid,
+        cell_m=cell_m,
         x_m=x.astype(np.float32),
         y_m=y.astype(np.float32),
         range_m=rng.astype(np.float32),
@@ -202,8 +245,8 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     if n_bins < factor:
         raise OdometryError(f"scan has {polar.shape[1]} bins: too few for max_range_m")
     sums = _block_sums(polar[:, :n_bins], factor)
-    # The bin means are sums * scale, made in `_condition_rows` from the exact integer sums
-    # (their median by counting); resampled rows need the float means.
+    # Bin means are sums * scale, made in `_condition_rows` from the exact integer sums (their
+    # median by counting); resampled rows need the float means.
     source: NDArray = sums
     scale = np.float32(1.0 / factor)
     mid = polar.shape[0] // 2
@@ -331,17 +374,8 @@ def render_cartesian(
     twist: NDArray[np.float64] | None = None,
     time_offset_s: float = 0.0,
 ) -> FloatImage:
-    """The level's windowed image (size_px, size_px) float32 of a scan (arguments as in
-    `sample_scan`)."""
-    image = sample_scan(
-        polar,
-        level.x_m,
-        level.y_m,
-        level.range_m,
-        level.bearing_rad,
-        rotation_rad,
-        twist,
-        time_offset_s,
-    )
+    """The level's windowed image (size_px, size_px) float32 of a scan (as `sample_scan`)."""
+    points = (level.x_m, level.y_m, level.range_m, level.bearing_rad)
+    image = sample_scan(polar, *points, rotation_rad, twist, time_offset_s)
     image *= level.window
     return image

@@ -1,13 +1,6 @@
-"""Scan-to-scan registration by phase correlation (PhaRaO-style), as pure functions.
-
-`register(ref, cur, cfg)`: the pose of `cur` in `ref`'s frame (dx, dy [m], dyaw [rad]; x forward,
-y left, yaw CCW) between the scans' reference times, from `register_images` between their
-de-skewed image frames (`PreparedScan`). Rotation by Fourier-Mellin on the coarse level (modulo
-pi, `odometry.rotation`); `cur` re-rendered turned into `ref`'s orientation and both half turns
-phase correlated on the coarse level; the rotation refined on a polar grid; the translation
-refined on the fine level. Peak qualities and coarse/fine agreement decide `ok`; the covariance
-comes from the peaks' widths and heights.
-"""
+"""Scan-to-scan registration by phase correlation (PhaRaO-style) as pure functions: rotation by
+Fourier-Mellin, both half turns correlated on the coarse level, the rotation refined on a polar
+grid, the translation on the fine level (docs/method.md; its use: `odometry.odometry`)."""
 
 from __future__ import annotations
 
@@ -21,10 +14,18 @@ from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.phase_correlation import PackedSpectrum, Peak, correlate, forward, locate_peak
+from odometry.phase_correlation import (
+    PackedSpectrum,
+    Peak,
+    correlate,
+    forward,
+    forward_rows,
+    locate_peak,
+)
 from odometry.preprocess import (
     CartesianLevel,
     PolarScan,
+    Scan,
     cartesian_level,
     preprocess_polar,
     render_cartesian,
@@ -33,14 +34,11 @@ from odometry.preprocess import (
 from odometry.rotation import (
     ROTATION,
     RotationEstimate,
-    Signature,
-    angular_spectrum,
     estimate_rotation,
     polar_grid,
     refine_rotation_against,
     signature,
 )
-from odometry.scan import Scan
 from raplace.se2 import compose, inverse, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
@@ -48,22 +46,19 @@ logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 F32 = NDArray[np.float32]
-Points = tuple[F32, F32, F32, F32]
-"""(x, y, range, bearing) [m, rad] of points, each (H, W) float32."""
 PEAK_SMOOTHING_PX = 1.0
 """Gaussian width [pixels] of a translation peak, so that a 3 x 3 fit locates it sub-pixel."""
 FINE_SEARCH_PX = 6
 """The fine peak is searched within this many fine pixels of the coarse estimate (the coarse
 peak's error is under a coarse pixel, about three fine ones)."""
 MAX_COARSE_FINE_DISAGREEMENT_M = 1.0
-"""Coarse and fine translations further apart than this [m] fail a registration (more than a
-coarse pixel: the fine peak is another structure)."""
+"""Coarse and fine translations further apart [m] fail a registration (the fine peak is another
+structure)."""
 COARSE_SIZE_PX = 256
-"""Side of the coarse image [pixels]: at the default 0.8 m it spans +-102 m, the useful range of
-a Navtech sensor."""
+"""Side of the coarse image [pixels]: at 0.8 m it spans +-102 m, a Navtech sensor's useful range."""
 FINE_SIZE_PX = 384
-"""Side of the fine image [pixels]: at the default 0.25 m it spans +-48 m, the near range where
-returns are dense and sharp enough for a sub-pixel translation."""
+"""Side of the fine image [pixels]: at 0.25 m it spans +-48 m, where returns are dense and sharp
+enough for a sub-pixel translation."""
 MIN_SIGMA_XY_M = 0.01
 """Floor of a registration's translation standard deviation [m] (range resolution, de-skew)."""
 MIN_SIGMA_YAW_DEG = 0.05
@@ -82,7 +77,7 @@ class MotionEstimate:
             [rad]).
         covariance: (3, 3) covariance of `motion` [m^2, m rad, rad^2], order (x, y, yaw).
         quality: peak-to-noise ratio of the final translation peak (higher is better).
-        ok: True when every check passed; a caller must not use `motion` when False.
+        ok: every check passed; a caller must not use `motion` otherwise.
         reason: why the estimate failed ("" when ok).
     """
 
@@ -126,39 +121,35 @@ class PreparedScan:
     def timestamp_ns(self) -> int:
         return self.polar.timestamp_ns
 
-    def _render(self, level: CartesianLevel, rotation_rad: float) -> NDArray[np.float32]:
+    def _render(self, level: CartesianLevel, rotation_rad: float) -> F32:
         """The scan's windowed image on `level`, turned by `rotation_rad`, at its image time."""
         return render_cartesian(self.polar, level, rotation_rad, self.twist, self.image_time_s)
 
-    def _sample(self, points: Points, rotation_rad: float) -> NDArray[np.float32]:
-        """The scan sampled at (x, y, range, bearing) points of its image frame."""
+    def _sample(self, points: tuple[F32, F32, F32, F32], rotation_rad: float) -> F32:
+        """The scan sampled at (x, y, range, bearing) points (each (H, W)) of its image frame."""
         return sample_scan(self.polar, *points, rotation_rad, self.twist, self.image_time_s)
 
     @functools.cached_property
     def coarse_spectrum(self) -> PackedSpectrum:
-        """Packed spectrum of the unrotated coarse image."""
         return forward(self._render(coarse_level(self.cfg), 0.0))
 
     @functools.cached_property
-    def rotation_signature(self) -> Signature:
-        """Fourier-Mellin signature of the coarse image."""
+    def rotation_signature(self) -> PackedSpectrum:
         return signature(self.coarse_spectrum, ROTATION)
 
     @functools.cached_property
     def fine_spectrum(self) -> PackedSpectrum:
-        """Packed spectrum of the unrotated fine image (for a reference)."""
         return forward(self._render(fine_level(self.cfg), 0.0))
 
     @functools.cached_property
-    def refine_image(self) -> NDArray[np.float32]:
-        """The scan on the rotation-refinement polar grid (for a reference)."""
+    def refine_image(self) -> F32:
+        """The scan on the rotation-refinement polar grid."""
         grid = polar_grid(ROTATION)
         return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
 
     @functools.cached_property
     def refine_spectrum(self) -> PackedSpectrum:
-        """`angular_spectrum` of `refine_image`."""
-        return angular_spectrum(self.refine_image)
+        return forward_rows(self.refine_image)
 
 
 def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) -> PreparedScan:
@@ -177,7 +168,7 @@ def fine_level(cfg: OdometryConfig) -> CartesianLevel:
 
 
 def _residual_rotation(
-    ref: PreparedScan, cur: PreparedScan, translation: FloatArray, yaw: float, cfg: OdometryConfig
+    ref: PreparedScan, cur: PreparedScan, translation: FloatArray, yaw: float
 ) -> RotationEstimate:
     """Rotation left after rendering `cur` through (translation [m], yaw [rad]) onto the polar
     grid about `ref`'s sensor."""
@@ -203,10 +194,7 @@ def register(
 
 
 def register_images(
-    ref: PreparedScan,
-    cur: PreparedScan,
-    cfg: OdometryConfig,
-    hint: FloatArray | None = None,
+    ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig, hint: FloatArray | None = None
 ) -> MotionEstimate:
     """Pose of `cur`'s image frame in `ref`'s (covariance in `ref`'s image frame).
 
@@ -231,18 +219,33 @@ def register_images(
                 # The translation again at the refined yaw (near the last one), then the rotation.
                 coarse_peak, yaw = _coarse_translation(ref, cur, yaw, cfg, t_coarse)
                 t_coarse = coarse_peak.shift_px * cell
-            rotation = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
+            rotation = _residual_rotation(ref, cur, t_coarse, yaw)
             yaw = float(wrap_angle(yaw + rotation.angle_rad))
-    peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
-    translation = peak.shift_px * cell
+    level = fine_level(cfg)
+    fine = cur._render(level, yaw)
+    centre = t_coarse / level.cell_m
+    surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX)
+    peak = locate_peak(
+        surface, PEAK_SMOOTHING_PX, (float(centre[0]), float(centre[1])), FINE_SEARCH_PX
+    )
+    translation = peak.shift_px * level.cell_m
     motion = np.array([translation[0], translation[1], yaw])
     # Only the images fail a registration (a prior is a hint, never a veto).
-    reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, cfg)
+    qcfg = cfg.quality
+    weakest = min(peak.quality, coarse_peak.quality)
+    reason = ""
+    if ref.empty or cur.empty:
+        reason = "a scan is empty after conditioning"
+    elif rotation.quality < qcfg.min_peak_quality:
+        reason = f"weak rotation peak (quality {rotation.quality:.1f})"
+    elif weakest < qcfg.min_peak_quality:
+        reason = f"weak translation peak (quality {weakest:.1f})"
+    elif np.hypot(*(motion[:2] - t_coarse)) > MAX_COARSE_FINE_DISAGREEMENT_M:
+        reason = f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
     if reason:
         logger.debug("registration failed: %s (motion %s)", reason, motion)
-    qcfg = cfg.quality
     cov = np.zeros((3, 3))
-    cov[:2, :2] = peak.covariance_px() * cell**2 * qcfg.sigma_scale**2
+    cov[:2, :2] = peak.covariance_px() * level.cell_m**2 * qcfg.sigma_scale**2
     cov[:2, :2] += np.eye(2) * MIN_SIGMA_XY_M**2
     cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(MIN_SIGMA_YAW_DEG) ** 2
     return MotionEstimate(motion, cov, float(peak.quality), not reason, reason)
@@ -274,61 +277,8 @@ def _coarse_translation(
     return peak, float(wrap_angle(angle_rad + turn))
 
 
-def _fine_translation(
-    ref: PreparedScan, cur: PreparedScan, t_coarse: FloatArray, yaw: float, cfg: OdometryConfig
-) -> tuple[Peak, float]:
-    """The fine level's translation peak near the coarse estimate, and the fine cell [m]."""
-    level = fine_level(cfg)
-    fine = cur._render(level, yaw)
-    centre = t_coarse / level.cell_m
-    surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX)
-    peak = locate_peak(
-        surface, PEAK_SMOOTHING_PX, (float(centre[0]), float(centre[1])), FINE_SEARCH_PX
-    )
-    return peak, level.cell_m
-
-
-def _failure_reason(
-    ref: PreparedScan,
-    cur: PreparedScan,
-    rotation: RotationEstimate,
-    coarse_peak: Peak,
-    peak: Peak,
-    t_coarse: FloatArray,
-    motion: FloatArray,
-    cfg: OdometryConfig,
-) -> str:
-    """Why the images do not support a registration ("" when every check passes)."""
-    qcfg = cfg.quality
-    if ref.empty or cur.empty:
-        return "a scan is empty after conditioning"
-    if rotation.quality < qcfg.min_peak_quality:
-        return f"weak rotation peak (quality {rotation.quality:.1f})"
-    if min(peak.quality, coarse_peak.quality) < qcfg.min_peak_quality:
-        return f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
-    if np.hypot(*(motion[:2] - t_coarse)) > MAX_COARSE_FINE_DISAGREEMENT_M:
-        return f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
-    return ""
-
-
-def kinematic_reason(twist: FloatArray, cfg: OdometryConfig) -> str:
-    """Why the body twist (vx, vy [m/s], yaw rate [rad/s]) is faster than the vehicle can move
-    or turn; "" when it is not."""
-    qcfg = cfg.quality
-    speed = float(np.hypot(twist[0], twist[1]))
-    if speed > qcfg.max_speed_mps:
-        return f"implausible speed {speed:.1f} m/s"
-    yaw_rate_dps = float(np.rad2deg(abs(twist[2])))
-    if yaw_rate_dps > qcfg.max_yaw_rate_dps:
-        return f"implausible yaw rate {yaw_rate_dps:.1f} deg/s"
-    return ""
-
-
 def estimate_motion(
-    prev: Scan,
-    cur: Scan,
-    cfg: OdometryConfig | None = None,
-    twist: FloatArray | None = None,
+    prev: Scan, cur: Scan, cfg: OdometryConfig | None = None, twist: FloatArray | None = None
 ) -> MotionEstimate:
     """Pose of scan `cur` in the frame of scan `prev` (check `ok` before using it).
 

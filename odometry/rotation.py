@@ -1,12 +1,6 @@
-"""Rotation between two scans by Fourier-Mellin, then a refinement on a polar grid.
-
-A magnitude spectrum ignores translation and turns with the image; resampled on a polar grid
-(angle x radius) a rotation is a shift along the angle axis, found by phase correlation along it.
-The magnitude is symmetric under a half turn, so the rotation is known modulo pi. Fourier-Mellin
-locks toward zero for small rotations (the pixel grid and window are fixed in both images), so
-`refine_rotation_against` follows once the translation is known: both scans sampled on one
-polar grid about the reference sensor, the remaining rotation a pure shift along the angle.
-"""
+"""Rotation between two scans by Fourier-Mellin (modulo pi: a shift along the angle of the
+polar-resampled magnitude spectra), then refined on a polar grid about the reference sensor once
+the translation is known (Fourier-Mellin locks toward zero for small turns; docs/method.md)."""
 
 from __future__ import annotations
 
@@ -31,26 +25,21 @@ from odometry.phase_correlation import (
     std_outside_rows,
 )
 
-Signature = PackedSpectrum
-"""Packed row spectra ((n_radii, n_angles) float32, `forward_rows`)."""
-
 
 @dataclass(frozen=True)
 class RotationSettings:
-    """Fourier-Mellin rotation settings (internal: `ROTATION`; they follow the image levels).
+    """Fourier-Mellin rotation settings (internal constants: `ROTATION`).
 
     Attributes:
         n_angles, n_radii: samples of the spectrum's angle over [0, pi) and of its radius.
         min_frequency, max_frequency: spectral radii used, as fractions of Nyquist.
         smoothing_bins: Gaussian width [angle bins] of the correlation peak.
-        refine: refine the rotation on the polar grid about the reference sensor.
-        refine_n_angles: angular samples of that grid over a full turn.
+        refine: refine the rotation on the polar grid; refine_n_angles: its samples of a turn.
         refine_min_range_m, refine_max_range_m, refine_range_step_m: its radial samples [m].
         refine_smoothing_bins: Gaussian width [angle bins] of the refinement peak.
         refine_passes: at most this many refinements, each after the first preceded by a coarse
-            translation at the refined yaw (the first is made at the Fourier-Mellin yaw).
-        refine_repeat_min_deg: a refinement is repeated only while its last correction was
-            larger than this [deg].
+            translation at the refined yaw.
+        refine_repeat_min_deg: a refinement is repeated only while the last one turned more.
     """
 
     n_angles: int = 720
@@ -86,7 +75,7 @@ class RotationEstimate:
 def _sampler(
     size_px: int, cfg: RotationSettings
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """cv2.remap maps (cols, rows) from (radius, angle) to a row-centred half spectrum."""
+    """cv2.remap maps (cols, rows): (radius, angle) to a row-centred half spectrum."""
     nyquist = size_px / 2.0
     radii = np.linspace(cfg.min_frequency * nyquist, cfg.max_frequency * nyquist, cfg.n_radii)
     angles = np.arange(cfg.n_angles) * (np.pi / cfg.n_angles)
@@ -95,9 +84,9 @@ def _sampler(
     return k_col.astype(np.float32), (k_row + nyquist).astype(np.float32)
 
 
-def signature(spectrum: PackedSpectrum, cfg: RotationSettings) -> Signature:
-    """The packed angular spectra (n_radii, n_angles) of the polar-resampled log magnitude of
-    an image's packed spectrum (size_px, size_px)."""
+def signature(spectrum: PackedSpectrum, cfg: RotationSettings) -> PackedSpectrum:
+    """Packed angular spectra (n_radii, n_angles) of the polar-resampled log magnitude of an
+    image's packed spectrum (size_px, size_px)."""
     size = spectrum.shape[0]
     centred = np.empty((size, size // 2 + 1), dtype=np.float32)
     _centred_log_magnitude(spectrum, centred)
@@ -133,7 +122,9 @@ def _centred_log_magnitude(packed, out):  # type: ignore[no-untyped-def]  # fmt:
             out[half - r, k] = value
 
 
-def estimate_rotation(ref: Signature, mov: Signature, cfg: RotationSettings) -> RotationEstimate:
+def estimate_rotation(
+    ref: PackedSpectrum, mov: PackedSpectrum, cfg: RotationSettings
+) -> RotationEstimate:
     """Rotation of the `mov` image relative to `ref` (modulo pi) from their signatures."""
     curve = correlate_1d(ref, mov, cfg.n_angles, cfg.smoothing_bins)
     return _rotation_of_peak(curve, cfg.smoothing_bins, np.pi / cfg.n_angles)
@@ -181,18 +172,13 @@ def polar_grid(cfg: RotationSettings) -> PolarGrid:
     )
 
 
-def angular_spectrum(image: NDArray[np.float32]) -> PackedSpectrum:
-    """Packed spectra (`forward_rows`) along the angle axis of a scan on a `PolarGrid`."""
-    return forward_rows(image)
-
-
 def refine_rotation_against(
     ref_spectrum: PackedSpectrum, mov: NDArray[np.float32], cfg: RotationSettings
 ) -> RotationEstimate:
     """The residual rotation [rad] to add to the estimate's yaw, of `mov` (the moved scan on
-    the grid through the current estimate) against the reference's `angular_spectrum`."""
+    the grid through the current estimate) against the reference's `forward_rows` spectra."""
     n = mov.shape[1]
-    curve = correlate_1d(ref_spectrum, angular_spectrum(mov), n, cfg.refine_smoothing_bins)
+    curve = correlate_1d(ref_spectrum, forward_rows(mov), n, cfg.refine_smoothing_bins)
     return _rotation_of_peak(curve, cfg.refine_smoothing_bins, 2.0 * np.pi / n)
 
 

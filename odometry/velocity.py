@@ -1,11 +1,5 @@
-"""The odometry's motion model: the running body velocity, what it may do, and the move of a
-scan's pose from its de-skewed image (mid-sweep) to its reference time.
-
-The velocity is a search hint and a de-skew input, never a veto: its yaw-rate trend is bounded
-(`Velocity.at`) and every twist it hands out is within the plausible speed and yaw rate
-(`bounded_twist`). Registrations chain image poses (`registration.PreparedScan`); the pose a user
-sees is the image pose moved by the velocity between the two times (`pose_at_reference`).
-"""
+"""The motion model: the running body velocity, the vehicle's limits on it, and the move of a
+scan's pose between its image time and its reference time (see `odometry.odometry`)."""
 
 from __future__ import annotations
 
@@ -17,7 +11,7 @@ from numpy.typing import NDArray
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist
 from odometry.registration import PreparedScan
-from raplace.se2 import compose, inverse
+from raplace.se2 import compose, inverse, wrap_angle
 from raplace.units import NS_PER_S
 
 FloatArray = NDArray[np.float64]
@@ -26,17 +20,22 @@ TWIST_REFRESH_MPS = 0.25
 TWIST_REFRESH_RADPS = np.deg2rad(2.0)
 """... or its yaw rate by more than this [rad/s]."""
 REDESKEW_MPS = 1.0
-"""A registered scan is de-skewed and registered again when its registration measures a velocity
-this far [m/s] from its de-skew's (below, the symmetric smear costs less than a second pass) ..."""
+"""A scan is de-skewed and registered again when its registration measures a velocity this far
+[m/s] from its de-skew's (below, the symmetric smear costs less than a second pass) ..."""
 REDESKEW_RADPS = np.deg2rad(5.0)
 """... or a yaw rate this far [rad/s]."""
+PREDICTION_TOLERANCE_M = 1.5
+"""A registration further than this [m] from the constant-velocity prediction is checked against
+one seeded with it: a few m/s^2 of braking over a 4 Hz interval stays inside."""
+PREDICTION_TOLERANCE_DEG = 5.0
+"""The same for the rotation [deg]: a steering change over a 4 Hz interval."""
 
 
 @dataclass(frozen=True)
 class Velocity:
-    """The running body velocity: the twist (vx, vy [m/s], yaw rate [rad/s]) measured between
-    two registered image poses, at the middle of that interval (`time_ns`), and the change of
-    its yaw rate since the measurement before (`yaw_rate_change` [rad/s] over `span_s` [s])."""
+    """The twist (vx, vy [m/s], yaw rate [rad/s]) measured between two registered image poses,
+    at the middle of that interval (`time_ns`), and the change of its yaw rate since the
+    measurement before (`yaw_rate_change` [rad/s] over `span_s` [s])."""
 
     twist: FloatArray
     time_ns: int
@@ -60,9 +59,16 @@ class Velocity:
         """The velocity after measuring `twist` over an interval centred at `time_ns`."""
         span_s = (time_ns - self.time_ns) / NS_PER_S
         change = float(twist[2] - self.twist[2]) if span_s > 0 else 0.0
-        return Velocity(
-            twist=twist, time_ns=time_ns, yaw_rate_change=change, span_s=max(span_s, 0.0)
-        )
+        return Velocity(twist, time_ns, change, max(span_s, 0.0))
+
+
+def plausible_twist(twist: FloatArray, cfg: OdometryConfig) -> bool:
+    """`twist` (vx, vy [m/s], yaw rate [rad/s]) is within the vehicle's speed and yaw rate."""
+    qcfg = cfg.quality
+    return not (
+        np.hypot(twist[0], twist[1]) > qcfg.max_speed_mps
+        or np.rad2deg(abs(twist[2])) > qcfg.max_yaw_rate_dps
+    )
 
 
 def bounded_twist(twist: FloatArray, cfg: OdometryConfig) -> FloatArray:
@@ -83,9 +89,19 @@ def close_twists(
     speed_mps: float = TWIST_REFRESH_MPS,
     yaw_rate_radps: float = TWIST_REFRESH_RADPS,
 ) -> bool:
-    """Two de-skew twists differ by at most `speed_mps` and `yaw_rate_radps`."""
+    """Two twists differ by at most `speed_mps` and `yaw_rate_radps`."""
     return bool(
         np.hypot(a[0] - b[0], a[1] - b[1]) <= speed_mps and abs(a[2] - b[2]) <= yaw_rate_radps
+    )
+
+
+def agrees(motion: FloatArray, expected: FloatArray) -> bool:
+    """`motion` (3,) is within the prediction tolerances of `expected` (3,) (poses or motions in
+    one frame)."""
+    off = np.asarray(motion, dtype=np.float64) - np.asarray(expected, dtype=np.float64)
+    return bool(
+        np.hypot(off[0], off[1]) <= PREDICTION_TOLERANCE_M
+        and abs(wrap_angle(float(off[2]))) <= np.deg2rad(PREDICTION_TOLERANCE_DEG)
     )
 
 
@@ -96,8 +112,7 @@ def pose_at_reference(image_pose: FloatArray, twist: FloatArray, image_time_s: f
 
 
 def interpolated_twist(before: Velocity, after: Velocity, time_ns: int) -> FloatArray:
-    """(3,) twist at `time_ns`, linear in time between two measured velocities (each at its
-    `time_ns`), held constant outside them."""
+    """(3,) twist at `time_ns`, linear in time between two velocities, held outside them."""
     span_ns = after.time_ns - before.time_ns
     if span_ns <= 0:
         return np.asarray(after.twist, dtype=np.float64).copy()

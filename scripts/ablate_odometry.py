@@ -98,7 +98,7 @@ def _patched(module: object, name: str, replacement: object) -> Iterator[None]:
 
 
 def _no_redeskew() -> contextlib.AbstractContextManager[None]:
-    return _patched(deskew_choice, "redeskewed", lambda _r, _b, rendered, *_a, **_k: rendered)
+    return _patched(deskew_choice, "redeskewed", lambda _r, rendered, *_a, **_k: rendered)
 
 
 def _no_deferred_first_images() -> contextlib.AbstractContextManager[None]:

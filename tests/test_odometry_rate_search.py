@@ -3,7 +3,6 @@ verification at low frame rates; `tests/test_loops.py` checks it on a loop query
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -36,11 +35,9 @@ def test_only_a_collapsed_peak_has_its_yaw_rate_searched(oxford: OxfordSequence)
     what comes back correlates at least as strongly."""
     cfg = OdometryConfig()
     twist = np.array([8.0, 0.0, np.deg2rad(20.0)])
-    reference = SimpleNamespace(
-        scan=PreparedScan(preprocess_polar(oxford[0], cfg.preprocess), twist, cfg)
-    )
+    reference = PreparedScan(preprocess_polar(oxford[0], cfg.preprocess), twist, cfg)
     scan = PreparedScan(preprocess_polar(oxford[1], cfg.preprocess), twist, cfg)
-    estimate = register_images(reference.scan, scan, cfg)
+    estimate = register_images(reference, scan, cfg)
     assert estimate.ok, estimate.reason
     calls = []
 
@@ -48,11 +45,11 @@ def test_only_a_collapsed_peak_has_its_yaw_rate_searched(oxford: OxfordSequence)
         calls.append(1)
         return register_images(*args, **kwargs)
 
-    kept = weak_searched(reference, (scan, estimate), estimate.quality, cfg, counting)  # type: ignore[arg-type]
+    kept = weak_searched(reference, (scan, estimate), estimate.quality, cfg, counting)
     assert kept[1] is estimate and calls == []
     limit = estimate.quality / deskew_choice.WEAK_PEAK_FRACTION
     searched_scan, searched = weak_searched(
         reference, (scan, estimate), 1.01 * limit, cfg, counting
-    )  # type: ignore[arg-type]
+    )
     assert len(calls) >= 2
     assert searched.ok and searched.quality >= estimate.quality

@@ -11,11 +11,10 @@ class OdometryError(ValueError):
 # After OdometryError, which the modules import.
 from odometry.config import OdometryConfig, PreprocessConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.deskew_choice import searched_registration
 from odometry.odometry import Odometry, OdometryResult
 from odometry.preprocess import PolarScan, RadarFrame, Scan, preprocess_polar, sample_scan
 from odometry.registration import MotionEstimate, PreparedScan, estimate_motion, prepare, register
-from odometry.velocity import Velocity, interpolated_twist, plausible_twist
+from odometry.velocity import Velocity, interpolated_twist, plausible_twist, searched_registration
 
 __all__ = [
     "MotionEstimate",

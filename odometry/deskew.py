@@ -49,9 +49,11 @@ def sampling_maps(
     bins = np.empty(shape, dtype=np.float32)
     rows = np.empty(shape, dtype=np.float32)
     f32 = np.float32
+    x, y, r, b = (
+        np.ascontiguousarray(a, dtype=np.float32) for a in (x_m, y_m, range_m, bearing_rad)
+    )
     _maps_kernel(
-        *(np.ascontiguousarray(a, dtype=np.float32) for a in (x_m, y_m, range_m, bearing_rad)),
-        f32(1.0 / azimuth_step_rad), f32(wrap_angle(first_azimuth_rad + rotation_rad)),
+        x, y, r, b, f32(1.0 / azimuth_step_rad), f32(wrap_angle(first_azimuth_rad + rotation_rad)),
         f32(n_azimuths), f32(1.0 / n_azimuths), f32(1.0 / bin_size_m), deskew, f32(t0), f32(t1),
         f32(wx), f32(wy), f32(wx * wx + wy * wy), f32(yaw_rate), bins, rows,
     )  # fmt: skip

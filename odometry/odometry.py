@@ -13,11 +13,11 @@
    veto, so a strong registration ends any run of failures.
 3. Measure the velocity between the last two image poses. When it is far from the one the scan
    was rendered with (hard braking, a curvature change), re-render the scan at the measured
-   velocity and register once more (`deskew_choice.redeskewed`).
+   velocity and register once more (`velocity.redeskewed`).
 4. Otherwise, while the yaw rate changes, register the scan de-skewed with the bounded yaw-rate
-   trend too and keep the stronger peak (`deskew_choice.with_trend`): past motion cannot tell a
+   trend too and keep the stronger peak (`velocity.with_trend`): past motion cannot tell a
    turn that tightens from one that ends, the images can. A peak below half the previous scan's
-   (a de-skew far off) has its de-skew yaw rate searched (`deskew_choice.weak_searched`).
+   (a de-skew far off) has its de-skew yaw rate searched (`velocity.weak_searched`).
 5. The pose at the scan's reference time (`OdometryResult.pose`) is its image pose moved by that
    velocity; the move's error does not accumulate. The covariance is the correlation peak's plus
    the terms the peak cannot show (`conversion_covariance`, `deskew_covariance`).
@@ -42,7 +42,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, deskew_choice
+from odometry import OdometryError
+from odometry import velocity as motion_model
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.preprocess import Scan, preprocess_polar
@@ -94,12 +95,10 @@ class OdometryResult:
         motion: (3,) this scan's pose in the previous scan's frame (zeros for the first scan).
         covariance: (3, 3) covariance [m^2, m rad, rad^2] (x, y, yaw) of `keyframe_motion`, in
             the previous scan's axes (so that it also serves, conservatively, for `motion`).
-        keyframe_index: index of the scan it was registered against (the keyframe, or the last
-            registered scan when the keyframe failed; itself for the first; the keyframe for a
-            gap).
+        keyframe_index: the scan it was registered against (the keyframe, or the last registered
+            scan when the keyframe failed; itself for the first; the keyframe for a gap).
         keyframe_motion: (3,) this scan's pose in that scan's frame.
-        is_keyframe: the scan is the keyframe for the scans that follow.
-        ok: the registration succeeded.
+        is_keyframe, ok: the scan is the next keyframe; its registration succeeded.
         gap: the pose is a constant-velocity prediction covering a failed registration.
         quality: peak-to-noise ratio of the translation peak (0 for the first scan or a gap).
         reason: why the registration failed ("" when ok).
@@ -147,12 +146,8 @@ class OdometryState:
 
 
 class Odometry:
-    """Phase-correlation radar odometry over a stream of scans.
-
-    Args:
-        config: odometry settings (defaults when None).
-        start_pose: (3,) T_world_radar of the first scan.
-    """
+    """Phase-correlation radar odometry over a stream of scans (`config`: defaults when None;
+    `start_pose`: (3,) T_world_radar of the first scan)."""
 
     def __init__(
         self, config: OdometryConfig | None = None, start_pose: ArrayLike = (0.0, 0.0, 0.0)
@@ -210,17 +205,13 @@ class Odometry:
 
     @property
     def prepared(self) -> PreparedScan | None:
-        """The last registered scan's conditioned form with its spectra (shared: read-only), or
-        None before the first scan."""
+        """The last registered scan's conditioned form and spectra (shared: read-only) or None."""
         previous = self._state.previous
         return None if previous is None else previous.scan
 
     def register(self, frame: Scan) -> OdometryResult:
         """Register the next scan; returns its result (`motion` from the previous scan's pose).
-
-        Raises:
-            OdometryError: the scan is malformed or not later than the previous one.
-        """
+        Raises `OdometryError` when the scan is malformed or not later than the previous one."""
         state = self._state
         state.registrations = 0
         index = len(state.history)
@@ -334,12 +325,12 @@ class Odometry:
         covariance = factor_covariance(registration, ref, node, previous)
         new_keyframe = ref is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = deskew_choice.refreshed(node.scan, state.velocity, cfg)
+            node.scan = motion_model.refreshed(node.scan, state.velocity, cfg)
             state.keyframe = node
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = deskew_choice.refreshed(keyframe.scan, state.velocity, cfg)
+                keyframe.scan = motion_model.refreshed(keyframe.scan, state.velocity, cfg)
         state.previous = state.last_registered = node
         motion = between(previous.pose, pose)
         return self._record(node, motion, covariance, ref, new_keyframe, estimate.quality)
@@ -352,11 +343,11 @@ class Odometry:
         velocity, cfg, register = self._state.velocity, self.config, self._register_images
         if velocity is None:
             return scan, estimate
-        rendered = deskew_choice.redeskewed(ref.scan, (scan, estimate), measured, cfg, register)
+        rendered = motion_model.redeskewed(ref.scan, (scan, estimate), measured, cfg, register)
         if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
-            rendered = deskew_choice.with_trend(ref.scan, scan, estimate, velocity, cfg, register)
+            rendered = motion_model.with_trend(ref.scan, scan, estimate, velocity, cfg, register)
         last_quality = self._state.history[-1].quality
-        return deskew_choice.weak_searched(ref.scan, rendered, last_quality, cfg, register)
+        return motion_model.weak_searched(ref.scan, rendered, last_quality, cfg, register)
 
     def _register_images(self, *args: Any, **kwargs: Any) -> MotionEstimate:
         """`registration.register_images`, counted in the scan's result (`registrations`)."""
@@ -375,9 +366,9 @@ class Odometry:
             node.image_pose = compose(node.pose, motion_from_twist(twist, node.scan.image_time_s))
 
     def _velocity_at(self, time_ns: int, trend: bool = True) -> FloatArray:
-        """`deskew_choice.expected_twist` of the running velocity at `time_ns`."""
+        """`velocity.expected_twist` of the running velocity at `time_ns`."""
         assert self._state.velocity is not None
-        return deskew_choice.expected_twist(self._state.velocity, time_ns, self.config, trend)
+        return motion_model.expected_twist(self._state.velocity, time_ns, self.config, trend)
 
     def _update_velocity(
         self, base: ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float

@@ -164,14 +164,8 @@ def cartesian_level(cell_m: float, size_px: int) -> CartesianLevel:
     inner = (1.0 - TAPER_FRACTION) * outer
     fall = np.clip((rng - inner) / (outer - inner), 0.0, 1.0)
     window = 0.5 * (1.0 + np.cos(np.pi * fall))
-    return CartesianLevel(
-        cell_m=cell_m,
-        x_m=x.astype(np.float32),
-        y_m=y.astype(np.float32),
-        range_m=rng.astype(np.float32),
-        bearing_rad=np.arctan2(y, x).astype(np.float32),
-        window=window.astype(np.float32),
-    )
+    arrays = (x, y, rng, np.arctan2(y, x), window)
+    return CartesianLevel(cell_m, *(a.astype(np.float32) for a in arrays))
 
 
 def _uniform_sweep(azimuths_rad: NDArray[np.float64]) -> tuple[float, float, NDArray[np.float64]]:
@@ -224,17 +218,17 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     """
     polar = np.asarray(scan.polar)
     az = np.asarray(scan.azimuths_rad, dtype=np.float64)
-    if polar.ndim != 2 or polar.shape[0] != az.shape[0] or az.ndim != 1:
+    if (
+        polar.ndim != 2
+        or az.shape != polar.shape[:1]
+        or polar.dtype != np.uint8
+        or len(az) < MIN_AZIMUTHS
+        or scan.range_resolution_m <= 0
+    ):
         raise OdometryError(
-            f"polar must be (n_azimuths, n_bins) with one azimuth per row; got polar "
-            f"{polar.shape}, azimuths {az.shape}"
-        )
-    if polar.dtype != np.uint8:
-        raise OdometryError(f"polar must be uint8, got {polar.dtype}")
-    if polar.shape[0] < MIN_AZIMUTHS or scan.range_resolution_m <= 0:
-        raise OdometryError(
-            f"need >= {MIN_AZIMUTHS} azimuths and a positive range resolution, got "
-            f"{polar.shape[0]} and {scan.range_resolution_m}"
+            f"a scan needs a uint8 polar (n_azimuths >= {MIN_AZIMUTHS}, n_bins), one azimuth per "
+            f"row and a positive range resolution; got polar {polar.shape} {polar.dtype}, "
+            f"azimuths {az.shape}, range resolution {scan.range_resolution_m}"
         )
     first, step, source_rows = _uniform_sweep(az)
     timing = _row_timing(scan, source_rows)
@@ -268,14 +262,7 @@ def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
     wrapped = np.empty((source.shape[0] + 1, source.shape[1]), dtype=np.float32)
     _condition_rows(source, scale, ring, near, float(cfg.noise_floor_sigmas), wrapped[:-1])
     wrapped[-1] = wrapped[0]
-    return PolarScan(
-        wrapped_image=wrapped,
-        first_azimuth_rad=first,
-        azimuth_step_rad=step,
-        bin_size_m=bin_size,
-        timestamp_ns=int(scan.timestamp_ns),
-        timing=timing,
-    )
+    return PolarScan(wrapped, first, step, bin_size, int(scan.timestamp_ns), timing)
 
 
 @numba.njit(nogil=True, cache=True, fastmath={"reassoc", "contract"})  # vectorised sums

@@ -1,8 +1,11 @@
-"""The motion model: the running body velocity, the vehicle's limits on it, and the move of a
-scan's pose between its image time and its reference time (see `odometry.odometry`)."""
+"""The motion model (steps 3-5 of `odometry.odometry`): the running body velocity, the vehicle's
+limits on it, the move of a pose between a scan's image and reference times, and which de-skew a
+scan keeps (each alternative rendered and registered again, seeded with the estimate so far,
+and kept where its peak is stronger or its registration measured another velocity)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,7 +13,7 @@ from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
 from odometry.deskew import motion_from_twist
-from odometry.registration import PreparedScan
+from odometry.registration import MotionEstimate, PreparedScan, register, register_images
 from raplace.se2 import compose, inverse, wrap_angle
 from raplace.units import NS_PER_S
 
@@ -29,6 +32,26 @@ PREDICTION_TOLERANCE_M = 1.5
 one seeded with it: a few m/s^2 of braking over a 4 Hz interval stays inside."""
 PREDICTION_TOLERANCE_DEG = 5.0
 """The same for the rotation [deg]: a steering change over a 4 Hz interval."""
+Register = Callable[..., MotionEstimate]
+"""`registration.register_images` (passed in so that callers can count registrations)."""
+Rendered = tuple[PreparedScan, MotionEstimate]
+"""A rendering of a scan and its registration against the reference."""
+YAW_TREND_GAIN = 1.0
+"""Fraction of the bounded yaw-rate trend (`Velocity.at`) in the second de-skew hypothesis."""
+WEAK_PEAK_FRACTION = 0.5
+"""A peak below this fraction of the previous scan's has its de-skew yaw rate searched (a de-skew
+far off collapses the peak; the real drive's peaks change by tens of per cent per scan)."""
+HALF_WIDTH_DPS = 16.0
+"""The search tries the yaw rate -+ this [deg/s], then the parabola's vertex (about the error of
+a yaw rate interpolated across a second of a junction turn)."""
+MIN_GAIN = 0.05
+"""A searched de-skew is kept only when its peak is stronger by more than this fraction."""
+LOW_RATE_INTERVAL_S = 0.75
+"""Loop queries are searched when their twist is interpolated over at least this long [s]."""
+MAX_VERTEX_STEPS = 3.0
+"""The parabola's vertex is tried at most this many half-widths from the kept yaw rate ..."""
+MIN_VERTEX_OFFSET = 0.25
+"""... and only when it is at least this many half-widths from every point already tried."""
 
 
 @dataclass(frozen=True)
@@ -128,3 +151,156 @@ def image_time_ns(scan: PreparedScan) -> int:
 def image_interval_s(previous: PreparedScan, scan: PreparedScan, dt_s: float) -> float:
     """Time [s] from `previous`'s image time to `scan`'s, `dt_s` apart in reference time."""
     return dt_s + scan.image_time_s - previous.image_time_s
+
+
+def expected_twist(
+    velocity: Velocity, time_ns: int, cfg: OdometryConfig, trend: bool = True
+) -> FloatArray:
+    """(3,) the running twist at `time_ns` [ns], with the bounded yaw-rate trend unless not
+    `trend`, within the plausible speed and yaw rate."""
+    return bounded_twist(velocity.at(time_ns, YAW_TREND_GAIN if trend else 0.0), cfg)
+
+
+def with_trend(
+    reference: PreparedScan,
+    scan: PreparedScan,
+    estimate: MotionEstimate,
+    velocity: Velocity,
+    cfg: OdometryConfig,
+    register: Register = register_images,
+) -> Rendered:
+    """`scan` and its estimate, or the scan de-skewed with the yaw-rate trend when that
+    correlates more strongly (a tightening turn; not tried when the trend hardly changes the
+    twist)."""
+    if scan.twist is None:
+        return scan, estimate
+    trend = expected_twist(velocity, image_time_ns(scan), cfg)
+    if close_twists(trend, scan.twist):
+        return scan, estimate
+    alternative = PreparedScan(scan.polar, trend, cfg)
+    other = register(reference, alternative, cfg, hint=estimate.motion)
+    if other.ok and other.quality > estimate.quality:
+        return alternative, other
+    return scan, estimate
+
+
+def redeskewed(
+    reference: PreparedScan,
+    rendered: Rendered,
+    measured: FloatArray,
+    cfg: OdometryConfig,
+    register: Register = register_images,
+) -> Rendered:
+    """`rendered`, or the scan re-rendered at the twist `measured` (3,) by its registration when
+    that is far from the one it was de-skewed with (hard braking, a curvature step)."""
+    scan, estimate = rendered
+    if scan.twist is None:
+        return rendered
+    measured = bounded_twist(measured, cfg)
+    if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
+        return rendered
+    again = PreparedScan(scan.polar, measured, cfg)
+    redone = register(reference, again, cfg, hint=estimate.motion)
+    return (again, redone) if redone.ok else rendered
+
+
+def weak_searched(
+    reference: PreparedScan,
+    rendered: Rendered,
+    last_quality: float,
+    cfg: OdometryConfig,
+    register: Register = register_images,
+) -> Rendered:
+    """`rendered`, or, when its peak is below `WEAK_PEAK_FRACTION` of the previous scan's
+    `last_quality`, the scan at the yaw rate `searched` finds."""
+    scan, estimate = rendered
+    if (
+        scan.twist is None
+        or not estimate.ok
+        or estimate.quality >= WEAK_PEAK_FRACTION * last_quality
+    ):
+        return rendered
+    return searched(reference, scan, estimate, cfg, register)
+
+
+def refreshed(scan: PreparedScan, velocity: Velocity, cfg: OdometryConfig) -> PreparedScan:
+    """A new keyframe re-rendered where its de-skew velocity is stale (e.g. the first scans)."""
+    if not cfg.deskew or scan.polar.timing is None:
+        return scan
+    new = expected_twist(velocity, image_time_ns(scan), cfg)
+    if scan.twist is not None and close_twists(new, scan.twist):
+        return scan
+    return PreparedScan(scan.polar, new, cfg)
+
+
+def vertex_offset(qualities: tuple[float, float, float]) -> float | None:
+    """Where the parabola through peak qualities at offsets -1, 0, +1 (half-widths) peaks,
+    within +-`MAX_VERTEX_STEPS`; None when it opens upwards or is next to a point tried."""
+    low, mid, high = qualities
+    curvature = low - 2.0 * mid + high
+    if curvature >= 0.0:
+        return None
+    offset = float(np.clip(0.5 * (low - high) / curvature, -MAX_VERTEX_STEPS, MAX_VERTEX_STEPS))
+    if min(abs(offset), abs(abs(offset) - 1.0)) <= MIN_VERTEX_OFFSET:
+        return None
+    return offset
+
+
+def searched(
+    reference: PreparedScan,
+    scan: PreparedScan,
+    estimate: MotionEstimate,
+    cfg: OdometryConfig,
+    register: Register,
+) -> Rendered:
+    """`scan` and its registration `estimate` against `reference`, or the scan de-skewed at the
+    yaw rate -+ `HALF_WIDTH_DPS` or the parabola's vertex (2-3 registrations seeded with
+    `estimate`) whose peak is stronger by more than `MIN_GAIN` (the peak quality peaks where the
+    scan's de-skew matches the reference image's)."""
+    assert scan.twist is not None
+    base_twist = scan.twist
+
+    def tried(offset: float) -> Rendered:
+        twist = base_twist.copy()
+        twist[2] += offset * np.deg2rad(HALF_WIDTH_DPS)
+        again = PreparedScan(scan.polar, bounded_twist(twist, cfg), cfg)
+        return again, register(reference, again, cfg, hint=estimate.motion)
+
+    candidates = [tried(-1.0), (scan, estimate), tried(1.0)]
+    qualities = tuple(e.quality if e.ok else 0.0 for _, e in candidates)
+    offset = vertex_offset((qualities[0], qualities[1], qualities[2]))
+    if offset is not None:
+        candidates.append(tried(offset))
+    found_scan, found = max(
+        (c for c in candidates if c[1].ok), key=lambda c: c[1].quality, default=(scan, estimate)
+    )
+    if found.quality <= (1.0 + MIN_GAIN) * estimate.quality:
+        return scan, estimate
+    return found_scan, found
+
+
+def searched_registration(
+    query: PreparedScan,
+    match: PreparedScan,
+    estimate: MotionEstimate,
+    cfg: OdometryConfig,
+    twist_span_s: float | None,
+) -> MotionEstimate:
+    """`estimate` (`register(query, match, cfg)`), or the registration with `query` de-skewed at
+    a searched yaw rate when that correlates more strongly; only for a query twist interpolated
+    over `twist_span_s` [s] of at least `LOW_RATE_INTERVAL_S` and a valid `estimate`."""
+    if (
+        query.twist is None
+        or twist_span_s is None
+        or twist_span_s < LOW_RATE_INTERVAL_S
+        or not estimate.ok
+    ):
+        return estimate
+    swapped = register(match, query, cfg, inverse(estimate.motion))
+    if not swapped.ok:
+        return estimate
+    found, _ = searched(match, query, swapped, cfg, register)
+    if found is query:
+        return estimate
+    again = register(found, match, cfg, estimate.motion)
+    return again if again.ok and again.quality > estimate.quality else estimate

@@ -1,4 +1,4 @@
-"""The de-skew yaw-rate search by correlation peak quality (`odometry.deskew_choice`, used by loop
+"""The de-skew yaw-rate search by correlation peak quality (`odometry.velocity`, used by loop
 verification at low frame rates; `tests/test_loops.py` checks it on a loop query)."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from odometry import OdometryConfig, deskew_choice
-from odometry.deskew_choice import MAX_VERTEX_STEPS, vertex_offset, weak_searched
+from odometry import OdometryConfig, velocity
 from odometry.preprocess import preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
+from odometry.velocity import MAX_VERTEX_STEPS, vertex_offset, weak_searched
 from radar_slam.datasets import OxfordSequence
 
 
@@ -47,7 +47,7 @@ def test_only_a_collapsed_peak_has_its_yaw_rate_searched(oxford: OxfordSequence)
 
     kept = weak_searched(reference, (scan, estimate), estimate.quality, cfg, counting)
     assert kept[1] is estimate and calls == []
-    limit = estimate.quality / deskew_choice.WEAK_PEAK_FRACTION
+    limit = estimate.quality / velocity.WEAK_PEAK_FRACTION
     searched_scan, searched = weak_searched(
         reference, (scan, estimate), 1.01 * limit, cfg, counting
     )

@@ -18,7 +18,6 @@ from test_odometry_sim import render
 
 from odometry import OdometryConfig, estimate_motion
 from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.deskew_choice import with_trend
 from odometry.odometry import Odometry, ScanNode
 from odometry.registration import (
     MotionEstimate,
@@ -27,7 +26,7 @@ from odometry.registration import (
     register,
     register_images,
 )
-from odometry.velocity import Velocity, bounded_twist, plausible_twist
+from odometry.velocity import Velocity, bounded_twist, plausible_twist, with_trend
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.stride import strided

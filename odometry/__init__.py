@@ -10,9 +10,16 @@ class OdometryError(ValueError):
 
 # After OdometryError, which the modules import.
 from odometry.config import OdometryConfig, PreprocessConfig
-from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry, OdometryResult
-from odometry.preprocess import PolarScan, RadarFrame, Scan, preprocess_polar, sample_scan
+from odometry.preprocess import (
+    PolarScan,
+    RadarFrame,
+    Scan,
+    motion_from_twist,
+    preprocess_polar,
+    sample_scan,
+    twist_from_motion,
+)
 from odometry.registration import MotionEstimate, PreparedScan, estimate_motion, prepare, register
 from odometry.velocity import Velocity, interpolated_twist, plausible_twist, searched_registration
 

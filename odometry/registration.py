@@ -13,31 +13,31 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.phase_correlation import (
+    ROTATION,
     PackedSpectrum,
     Peak,
+    Points,
+    RotationEstimate,
     correlate,
+    estimate_rotation,
     forward,
     forward_rows,
     locate_peak,
+    polar_grid,
+    refine_rotation_against,
+    signature,
 )
 from odometry.preprocess import (
     CartesianLevel,
     PolarScan,
     Scan,
     cartesian_level,
+    motion_from_twist,
     preprocess_polar,
     render_cartesian,
     sample_scan,
-)
-from odometry.rotation import (
-    ROTATION,
-    RotationEstimate,
-    estimate_rotation,
-    polar_grid,
-    refine_rotation_against,
-    signature,
+    twist_from_motion,
 )
 from raplace.se2 import compose, inverse, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
@@ -70,39 +70,21 @@ hint's translation: the error of a constant-velocity prediction at 1 Hz."""
 
 @dataclass(frozen=True)
 class MotionEstimate:
-    """Relative motion between two scans.
+    """Relative motion between two scans (a caller must not use `motion` unless `ok`)."""
 
-    Attributes:
-        motion: (3,) pose of the current scan in the reference scan's frame (dx, dy [m], dyaw
-            [rad]).
-        covariance: (3, 3) covariance of `motion` [m^2, m rad, rad^2], order (x, y, yaw).
-        quality: peak-to-noise ratio of the final translation peak (higher is better).
-        ok: every check passed; a caller must not use `motion` otherwise.
-        reason: why the estimate failed ("" when ok).
-    """
-
-    motion: FloatArray
-    covariance: FloatArray
-    quality: float
-    ok: bool
-    reason: str = ""
+    motion: FloatArray  # (3,) the current scan's pose in the reference's frame (dx, dy [m], dyaw)
+    covariance: FloatArray  # (3, 3) of `motion` [m^2, m rad, rad^2], order (x, y, yaw)
+    quality: float  # peak-to-noise ratio of the final translation peak
+    ok: bool  # every check passed
+    reason: str = ""  # why the estimate failed ("" when ok)
 
 
 class PreparedScan:
-    """A conditioned scan with the spectra registration needs, each made once on first use.
-
-    The images show the scene from the sensor pose at the scan's *image time*: mid-sweep when
-    the scan is de-skewed (a velocity error then only smears the image symmetrically), the
-    reference time otherwise.
-
-    Attributes:
-        polar: the conditioned polar scan.
-        twist: (3,) body velocity used for de-skewing (None: as measured).
-        image_time_s: image time relative to the scan's reference time [s] (0 without de-skew
-            or azimuth times).
-        image_pose: (3,) T_reference_image under `twist` (zeros without a twist).
-        empty: nothing is left after conditioning (the scan cannot be registered).
-    """
+    """A conditioned scan with the spectra registration needs, each made once on first use. Its
+    images show the scene from the sensor pose at its image time, `image_time_s` [s] after the
+    reference time (mid-sweep; 0 with de-skew off or without azimuth times), at `image_pose` (3,)
+    T_reference_image under `twist` (3,) (vx, vy [m/s], yaw rate [rad/s]; None: as measured,
+    then the pose is zeros). `empty`: nothing is left after conditioning."""
 
     def __init__(self, polar: PolarScan, twist: FloatArray | None, cfg: OdometryConfig) -> None:
         self.polar = polar
@@ -125,7 +107,7 @@ class PreparedScan:
         """The scan's windowed image on `level`, turned by `rotation_rad`, at its image time."""
         return render_cartesian(self.polar, level, rotation_rad, self.twist, self.image_time_s)
 
-    def _sample(self, points: tuple[F32, F32, F32, F32], rotation_rad: float) -> F32:
+    def _sample(self, points: Points, rotation_rad: float) -> F32:
         """The scan sampled at (x, y, range, bearing) points (each (H, W)) of its image frame."""
         return sample_scan(self.polar, *points, rotation_rad, self.twist, self.image_time_s)
 
@@ -196,13 +178,10 @@ def register(
 def register_images(
     ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig, hint: FloatArray | None = None
 ) -> MotionEstimate:
-    """Pose of `cur`'s image frame in `ref`'s (covariance in `ref`'s image frame).
-
-    Without `hint` the search is global (rotation over the full circle, translation anywhere in
-    the coarse image). With `hint` (3,) (dx, dy [m], dyaw [rad]) the rotation starts from the
-    hint's yaw and the coarse peak is searched within `HINT_RADIUS_M` of its translation; the
-    caller compares the two by peak quality (a hint never overrules the images).
-    """
+    """Pose of `cur`'s image frame in `ref`'s (covariance in `ref`'s image frame): a global search
+    without `hint`; with `hint` (3,) (dx, dy [m], dyaw [rad]) the rotation starts from its yaw
+    and the coarse peak is searched within `HINT_RADIUS_M` of its translation (the caller
+    compares the two by peak quality: a hint never overrules the images)."""
     cell = coarse_level(cfg).cell_m
     if hint is None:
         rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, ROTATION)
@@ -252,21 +231,17 @@ def register_images(
 
 
 def _coarse_translation(
-    ref: PreparedScan,
-    cur: PreparedScan,
-    angle_rad: float,
-    cfg: OdometryConfig,
-    hint_xy: FloatArray | None,
+    ref: PreparedScan, cur: PreparedScan, yaw: float, cfg: OdometryConfig, hint: FloatArray | None
 ) -> tuple[Peak, float]:
-    """Coarse translation peak and yaw [rad] with `cur` turned by `angle_rad`: both half-turn
-    hypotheses, the stronger peak winning; with `hint_xy` (2,) [m] only `angle_rad`, the peak
-    searched within `HINT_RADIUS_M` of it."""
+    """Coarse translation peak and yaw [rad] with `cur` turned by `yaw`: both half-turn
+    hypotheses, the stronger peak winning; with `hint` (2,) [m] only `yaw`, the peak searched
+    within `HINT_RADIUS_M` of it."""
     level = coarse_level(cfg)
-    image = cur._render(level, angle_rad)
+    image = cur._render(level, yaw)
     spectrum = forward(image)
-    turns = (0.0, np.pi) if hint_xy is None else (0.0,)
-    centre = None if hint_xy is None else (hint_xy[0] / level.cell_m, hint_xy[1] / level.cell_m)
-    radius = None if hint_xy is None else HINT_RADIUS_M / level.cell_m
+    turns = (0.0, np.pi) if hint is None else (0.0,)
+    centre = None if hint is None else (hint[0] / level.cell_m, hint[1] / level.cell_m)
+    radius = None if hint is None else HINT_RADIUS_M / level.cell_m
     hypotheses = []
     for turn in turns:
         surface = correlate(
@@ -274,18 +249,15 @@ def _coarse_translation(
         )
         hypotheses.append((locate_peak(surface, PEAK_SMOOTHING_PX, centre, radius), turn))
     peak, turn = max(hypotheses, key=lambda h: h[0].quality)
-    return peak, float(wrap_angle(angle_rad + turn))
+    return peak, float(wrap_angle(yaw + turn))
 
 
 def estimate_motion(
     prev: Scan, cur: Scan, cfg: OdometryConfig | None = None, twist: FloatArray | None = None
 ) -> MotionEstimate:
-    """Pose of scan `cur` in the frame of scan `prev` (check `ok` before using it).
-
-    `twist` (3,) de-skews both scans; without it they are registered as measured and, when both
-    carry azimuth times and de-skewing is on, once more de-skewed with the velocity that first
-    estimate gives.
-    """
+    """Pose of scan `cur` in the frame of scan `prev` (check `ok`). `twist` (3,) de-skews both;
+    without it they are registered as measured, then (with azimuth times and de-skew on) again
+    de-skewed at the velocity that estimate gives."""
     cfg = OdometryConfig() if cfg is None else cfg
     ref_polar = preprocess_polar(prev, cfg.preprocess)
     cur_polar = preprocess_polar(cur, cfg.preprocess)

@@ -1,7 +1,5 @@
-"""The motion model (steps 3-5 of `odometry.odometry`): the running body velocity, the vehicle's
-limits on it, the move of a pose between a scan's image and reference times, and which de-skew a
-scan keeps (each alternative rendered and registered again, seeded with the estimate so far,
-and kept where its peak is stronger or its registration measured another velocity)."""
+"""The motion model (steps 3-5 of `odometry.odometry`): the running velocity, the vehicle's limits
+on it, the move between a scan's image and reference times, and which de-skew a scan keeps."""
 
 from __future__ import annotations
 
@@ -12,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import motion_from_twist
+from odometry.preprocess import motion_from_twist
 from odometry.registration import MotionEstimate, PreparedScan, register, register_images
 from raplace.se2 import compose, inverse, wrap_angle
 from raplace.units import NS_PER_S
@@ -32,10 +30,8 @@ PREDICTION_TOLERANCE_M = 1.5
 one seeded with it: a few m/s^2 of braking over a 4 Hz interval stays inside."""
 PREDICTION_TOLERANCE_DEG = 5.0
 """The same for the rotation [deg]: a steering change over a 4 Hz interval."""
-Register = Callable[..., MotionEstimate]
-"""`registration.register_images` (passed in so that callers can count registrations)."""
-Rendered = tuple[PreparedScan, MotionEstimate]
-"""A rendering of a scan and its registration against the reference."""
+Register = Callable[..., MotionEstimate]  # `register_images`, passed in to count registrations
+Rendered = tuple[PreparedScan, MotionEstimate]  # a rendering of a scan and its registration
 YAW_TREND_GAIN = 1.0
 """Fraction of the bounded yaw-rate trend (`Velocity.at`) in the second de-skew hypothesis."""
 WEAK_PEAK_FRACTION = 0.5
@@ -106,12 +102,7 @@ def bounded_twist(twist: FloatArray, cfg: OdometryConfig) -> FloatArray:
     return bounded
 
 
-def close_twists(
-    a: FloatArray,
-    b: FloatArray,
-    speed_mps: float = TWIST_REFRESH_MPS,
-    yaw_rate_radps: float = TWIST_REFRESH_RADPS,
-) -> bool:
+def close_twists(a: FloatArray, b: FloatArray, speed_mps: float, yaw_rate_radps: float) -> bool:
     """Two twists differ by at most `speed_mps` and `yaw_rate_radps`."""
     return bool(
         np.hypot(a[0] - b[0], a[1] - b[1]) <= speed_mps and abs(a[2] - b[2]) <= yaw_rate_radps
@@ -156,8 +147,7 @@ def image_interval_s(previous: PreparedScan, scan: PreparedScan, dt_s: float) ->
 def expected_twist(
     velocity: Velocity, time_ns: int, cfg: OdometryConfig, trend: bool = True
 ) -> FloatArray:
-    """(3,) the running twist at `time_ns` [ns], with the bounded yaw-rate trend unless not
-    `trend`, within the plausible speed and yaw rate."""
+    """(3,) the running twist at `time_ns` [ns], with the yaw-rate trend when `trend`, bounded."""
     return bounded_twist(velocity.at(time_ns, YAW_TREND_GAIN if trend else 0.0), cfg)
 
 
@@ -169,13 +159,12 @@ def with_trend(
     cfg: OdometryConfig,
     register: Register = register_images,
 ) -> Rendered:
-    """`scan` and its estimate, or the scan de-skewed with the yaw-rate trend when that
-    correlates more strongly (a tightening turn; not tried when the trend hardly changes the
-    twist)."""
+    """`scan` and its estimate, or the scan de-skewed with the yaw-rate trend (a tightening turn)
+    when that correlates more strongly (not tried when the trend hardly changes the twist)."""
     if scan.twist is None:
         return scan, estimate
     trend = expected_twist(velocity, image_time_ns(scan), cfg)
-    if close_twists(trend, scan.twist):
+    if close_twists(trend, scan.twist, TWIST_REFRESH_MPS, TWIST_REFRESH_RADPS):
         return scan, estimate
     alternative = PreparedScan(scan.polar, trend, cfg)
     other = register(reference, alternative, cfg, hint=estimate.motion)
@@ -185,42 +174,35 @@ def with_trend(
 
 
 def redeskewed(
-    reference: PreparedScan,
+    ref: PreparedScan,
     rendered: Rendered,
-    measured: FloatArray,
+    twist: FloatArray,
     cfg: OdometryConfig,
-    register: Register = register_images,
+    register: Register,
 ) -> Rendered:
-    """`rendered`, or the scan re-rendered at the twist `measured` (3,) by its registration when
+    """`rendered`, or the scan re-rendered at the `twist` (3,) its registration measures when
     that is far from the one it was de-skewed with (hard braking, a curvature step)."""
     scan, estimate = rendered
     if scan.twist is None:
         return rendered
-    measured = bounded_twist(measured, cfg)
-    if close_twists(measured, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
+    twist = bounded_twist(twist, cfg)
+    if close_twists(twist, scan.twist, REDESKEW_MPS, REDESKEW_RADPS):
         return rendered
-    again = PreparedScan(scan.polar, measured, cfg)
-    redone = register(reference, again, cfg, hint=estimate.motion)
+    again = PreparedScan(scan.polar, twist, cfg)
+    redone = register(ref, again, cfg, hint=estimate.motion)
     return (again, redone) if redone.ok else rendered
 
 
 def weak_searched(
-    reference: PreparedScan,
-    rendered: Rendered,
-    last_quality: float,
-    cfg: OdometryConfig,
-    register: Register = register_images,
+    ref: PreparedScan, rendered: Rendered, last: float, cfg: OdometryConfig, register: Register
 ) -> Rendered:
-    """`rendered`, or, when its peak is below `WEAK_PEAK_FRACTION` of the previous scan's
-    `last_quality`, the scan at the yaw rate `searched` finds."""
+    """`rendered`, or, when its peak is below `WEAK_PEAK_FRACTION` of the previous scan's quality
+    `last`, the scan at the yaw rate `searched` finds."""
     scan, estimate = rendered
-    if (
-        scan.twist is None
-        or not estimate.ok
-        or estimate.quality >= WEAK_PEAK_FRACTION * last_quality
-    ):
+    strong = estimate.quality >= WEAK_PEAK_FRACTION * last
+    if scan.twist is None or not estimate.ok or strong:
         return rendered
-    return searched(reference, scan, estimate, cfg, register)
+    return searched(ref, scan, estimate, cfg, register)
 
 
 def refreshed(scan: PreparedScan, velocity: Velocity, cfg: OdometryConfig) -> PreparedScan:
@@ -228,7 +210,9 @@ def refreshed(scan: PreparedScan, velocity: Velocity, cfg: OdometryConfig) -> Pr
     if not cfg.deskew or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
-    if scan.twist is not None and close_twists(new, scan.twist):
+    if scan.twist is not None and close_twists(
+        new, scan.twist, TWIST_REFRESH_MPS, TWIST_REFRESH_RADPS
+    ):
         return scan
     return PreparedScan(scan.polar, new, cfg)
 
@@ -289,12 +273,8 @@ def searched_registration(
     """`estimate` (`register(query, match, cfg)`), or the registration with `query` de-skewed at
     a searched yaw rate when that correlates more strongly; only for a query twist interpolated
     over `twist_span_s` [s] of at least `LOW_RATE_INTERVAL_S` and a valid `estimate`."""
-    if (
-        query.twist is None
-        or twist_span_s is None
-        or twist_span_s < LOW_RATE_INTERVAL_S
-        or not estimate.ok
-    ):
+    short = twist_span_s is None or twist_span_s < LOW_RATE_INTERVAL_S
+    if query.twist is None or short or not estimate.ok:
         return estimate
     swapped = register(match, query, cfg, inverse(estimate.motion))
     if not swapped.ok:

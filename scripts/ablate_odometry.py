@@ -40,7 +40,7 @@ import numpy as np
 import odometry.odometry as odometry_module
 import odometry.registration as registration
 import odometry.velocity as velocity
-from odometry.rotation import ROTATION
+from odometry.phase_correlation import ROTATION
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import evaluate

@@ -17,27 +17,24 @@ import pytest
 from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import OdometryConfig, PreprocessConfig
-from odometry.deskew import sampling_maps
 from odometry.phase_correlation import (
     PEAK_EXCLUSION_SIGMAS,
+    ROTATION,
     SPECTRUM_EPS,
+    _centred_log_magnitude,
+    _rotation_of_peak,
     correlate,
+    correlate_1d,
     forward,
     forward_rows,
     inverse,
     locate_peak,
     pack,
-)
-from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
-from odometry.registration import PreparedScan, _residual_rotation, coarse_level
-from odometry.rotation import (
-    ROTATION,
-    _centred_log_magnitude,
-    _rotation_of_peak,
-    correlate_1d,
     polar_grid,
     refine_rotation_against,
 )
+from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian, sampling_maps
+from odometry.registration import PreparedScan, _residual_rotation, coarse_level
 from raplace.warp import wrap_rows
 
 N_AZ = 400

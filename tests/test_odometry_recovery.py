@@ -17,8 +17,8 @@ from numpy.typing import NDArray
 from test_odometry_sim import render
 
 from odometry import OdometryConfig, estimate_motion
-from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry, ScanNode
+from odometry.preprocess import motion_from_twist, twist_from_motion
 from odometry.registration import (
     MotionEstimate,
     PreparedScan,
@@ -257,7 +257,7 @@ def test_the_last_registered_scan_stands_in_for_a_failed_keyframe(
             self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
         ) -> MotionEstimate:
             estimate = super()._registered(reference, scan, predicted)
-            if len(self.results) == failing and reference is self._state.keyframe:
+            if len(self.results) == failing and reference is self._keyframe:
                 return dataclasses.replace(estimate, ok=False, reason="forced")
             return estimate
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from odometry import Odometry, OdometryResult
-from odometry.deskew import motion_from_twist
+from odometry.preprocess import motion_from_twist
 from odometry.velocity import Velocity, interpolated_twist, pose_at_reference
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided

@@ -69,8 +69,7 @@ braking or acceleration over a 4 Hz interval, with margin)."""
 GAP_SIGMA_YAW_DEG = 5.0
 """The same for its rotation [deg] (a steering change over the interval)."""
 KEYFRAME_QUALITY_FACTOR = 2.0
-"""A peak below this multiple of `quality.min_peak_quality` makes the scan the keyframe (the
-overlap with the keyframe is fading)."""
+"""A peak below this multiple of `quality.min_peak_quality` makes a keyframe (overlap fading)."""
 UNAMBIGUOUS_QUALITY_FACTOR = 5.0
 """A global registration whose peak is at least this multiple of `quality.min_peak_quality` is
 kept without a seeded one even off the prediction: the seeded search found the same motion there
@@ -123,8 +122,7 @@ class ScanNode:
 
 
 class Odometry:
-    """Phase-correlation radar odometry over a stream of scans (`config`: defaults when None;
-    `start_pose`: (3,) T_world_radar of the first scan)."""
+    """Phase-correlation radar odometry over a scan stream (`start_pose`: (3,) T_world_radar)."""
 
     def __init__(
         self, config: OdometryConfig | None = None, start_pose: ArrayLike = (0.0, 0.0, 0.0)
@@ -212,8 +210,7 @@ class Odometry:
         return self._accept(index, scan, reference, estimate, dt_s)
 
     def _fallback(self) -> ScanNode | None:
-        """The scan tried when the keyframe cannot be registered: the last registered scan,
-        nearer in time (None when it is the keyframe)."""
+        """The last registered scan, tried when the keyframe fails (None: it is the keyframe)."""
         last = self._last_registered
         return None if last is self._keyframe else last
 
@@ -237,8 +234,7 @@ class Odometry:
     def _predicted_image_pose(
         self, previous: ScanNode, scan: PreparedScan, dt_s: float
     ) -> FloatArray | None:
-        """The image pose (world) the constant-velocity model expects for `scan` (None before
-        any velocity is known)."""
+        """The image pose (world) the constant-velocity model expects for `scan`, or None."""
         if self._velocity is None:
             return None
         twist = bounded_twist(self._velocity.twist, self.config)
@@ -248,9 +244,8 @@ class Odometry:
     def _registered(
         self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
     ) -> MotionEstimate:
-        """`scan`'s image registered against `reference`'s: globally, and when that fails, or
-        has a weaker peak and disagrees with the prediction, also seeded with it; the stronger
-        peak wins."""
+        """`scan`'s image registered against `reference`'s globally and, when that fails or is
+        weaker and off the prediction, seeded with it too; the stronger peak wins."""
         cfg = self.config
         estimate = self._register_images(reference.scan, scan, cfg)
         if predicted is None:
@@ -318,8 +313,7 @@ class Odometry:
     def _rerendered(
         self, ref: ScanNode, scan: PreparedScan, estimate: MotionEstimate, measured: FloatArray
     ) -> tuple[PreparedScan, MotionEstimate]:
-        """The scan's de-skew after steps 3 and 4 of the module docstring (`measured` (3,): the
-        twist its registration measures)."""
+        """The scan's de-skew after steps 3-4 of the module docstring (`measured`: (3,) twist)."""
         velocity, cfg, register = self._velocity, self.config, self._register_images
         if velocity is None:
             return scan, estimate
@@ -350,8 +344,7 @@ class Odometry:
     def _update_velocity(
         self, base: ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float
     ) -> FloatArray:
-        """Measure the twist from `base`'s image pose to `image_pose` (`interval_s` apart);
-        returns its change from the last measurement (zeros for the first)."""
+        """Measure the twist from `base`'s image pose to `image_pose`; returns its change (or 0)."""
         twist = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         centre_ns = (image_time_ns(base.scan) + image_time_ns(scan)) // 2
         if self._velocity is None:
@@ -364,8 +357,7 @@ class Odometry:
     def _gap(
         self, index: int, scan: PreparedScan, predicted: FloatArray | None, failed: MotionEstimate
     ) -> OdometryResult:
-        """Cover a failed registration with the constant-velocity prediction (standing still
-        before any velocity is known); the keyframe stays."""
+        """Cover a failed registration with the constant-velocity prediction; the keyframe stays."""
         previous, keyframe = self._previous, self._keyframe
         assert previous is not None and keyframe is not None
         if predicted is None:  # no velocity yet
@@ -383,8 +375,7 @@ class Odometry:
     def _record(
         self, node: ScanNode, cov: FloatArray, keyframe: ScanNode, quality: float, reason: str = ""
     ) -> OdometryResult:
-        """Append and return the result of scan `node`, registered against `keyframe` (a gap when
-        `reason` says why it failed); its motion is from the last result's pose."""
+        """Append and return `node`'s result against `keyframe` (`reason`: why a gap failed)."""
         history = self._history
         motion = between(history[-1].pose, node.pose) if history else np.zeros(3)
         result = OdometryResult(
@@ -409,10 +400,9 @@ class Odometry:
 def conversion_covariance(
     registration: FloatArray, change: ArrayLike, image_time_s: float, interval_s: float
 ) -> FloatArray:
-    """(3, 3) covariance (scan axes) of moving a scan's image pose by the velocity over
-    `image_time_s` [s]: the velocity is two image poses `interval_s` [s] apart (twice the
-    `registration` covariance over the interval squared) lagging by `VELOCITY_LAG_FRACTION` of
-    its last `change` (3,) [m/s, m/s, rad/s]."""
+    """(3, 3) covariance (scan axes) of moving the image pose by the velocity over `image_time_s`
+    [s]: that of two image poses `interval_s` [s] apart (twice `registration` over the interval
+    squared) lagging by `VELOCITY_LAG_FRACTION` of its last `change` (3,) [m/s, m/s, rad/s]."""
     if image_time_s == 0.0 or interval_s <= 0:
         return np.zeros((3, 3))
     lag = VELOCITY_LAG_FRACTION * np.asarray(change, dtype=float)

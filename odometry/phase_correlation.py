@@ -1,7 +1,6 @@
-"""Phase correlation on packed spectra (OpenCV's CCS layout, `pack`), docs/method.md: translation
-from the whitened cross-power spectrum times a Gaussian low-pass (a shift's peak is a sampled
-Gaussian, located sub-pixel by a quadratic fit of its log); rotation by Fourier-Mellin (modulo pi,
-locking toward zero for small turns), then refined along the angles of a polar grid."""
+"""Phase correlation on packed spectra (OpenCV's CCS layout, `pack`; docs/method.md): translation
+by a whitened cross-power spectrum times a Gaussian low-pass (peaks fitted sub-pixel); rotation by
+Fourier-Mellin (modulo pi; locks toward zero for small turns), refined on a polar grid."""
 
 from __future__ import annotations
 
@@ -41,8 +40,7 @@ def forward(image: FloatImage) -> PackedSpectrum:
 
 
 def inverse(packed: PackedSpectrum) -> FloatImage:
-    """The real image (H, W) float32 of a packed spectrum, unscaled (H W times the image whose
-    `forward` it is)."""
+    """The real image (H, W) float32 of a packed spectrum, unscaled (H W times its `forward`'s)."""
     return np.asarray(cv2.idft(packed, flags=cv2.DFT_REAL_OUTPUT), dtype=np.float32)
 
 
@@ -73,10 +71,9 @@ def forward_rows(image: FloatImage) -> PackedSpectrum:
 
 @dataclass(frozen=True)
 class Peak:
-    """A located correlation peak: its sub-pixel shift (2,) (rows, cols) [pixels] wrapped to
-    [-H/2, H/2), its quality (the surface at the integer peak over the standard deviation away
-    from it; about 3-5 for noise alone) and the (2, 2) negative Hessian of the log surface
-    [1/pixel^2] (positive definite for a proper peak)."""
+    """A correlation peak: sub-pixel shift (2,) (rows, cols) [pixels] in [-H/2, H/2), quality (the
+    peak over the standard deviation away from it; 3-5 for noise alone) and the (2, 2) negative
+    Hessian of the log surface [1/pixel^2] (positive definite for a proper peak)."""
 
     shift_px: FloatArray
     quality: float
@@ -94,8 +91,7 @@ class Peak:
 
 @functools.lru_cache(maxsize=16)
 def _packed_lowpass(shape: tuple[int, int], sigma_px: float) -> PackedSpectrum:
-    """Packed weights that convolve a surface of `shape` with a Gaussian of `sigma_px` [pixels],
-    times 1 / (H W) (the unscaled inverse DFT's)."""
+    """Packed Gaussian (`sigma_px` [pixels]) low-pass for a surface of `shape`, times 1 / (H W)."""
     fy = np.fft.fftfreq(shape[0])[:, None]
     fx = np.fft.rfftfreq(shape[1])[None, :]
     weights = np.exp(-2.0 * (np.pi * sigma_px) ** 2 * (fy * fy + fx * fx)).astype(np.float32)
@@ -135,8 +131,7 @@ def correlate(
 
 @numba.njit(nogil=True, cache=True)
 def _cross_power_kernel(ref, mov, weights, ramp, half_turn, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out = weights * C / (|C| + eps), C = mov * conj(ref) (mov replaced by ramp * conj(mov)
-    for a half turn), on packed spectra, in float32."""
+    """out = weights * C / (|C| + eps) on packed spectra (`_whitened_product`), float32."""
     h, w = out.shape
     zero = np.float32(0.0)
     for i in range(h):
@@ -159,8 +154,7 @@ def _cross_power_kernel(ref, mov, weights, ramp, half_turn, out):  # type: ignor
 
 @numba.njit(nogil=True, cache=True, inline="always")
 def _whitened_product(m_re, m_im, r_re, r_im, p_re, p_im, half_turn, weight):  # type: ignore[no-untyped-def]  # fmt: skip
-    """weight * C / (|C| + eps), C = m conj(r) (m replaced by p conj(m) for a half turn), as
-    (Re, Im) float32."""
+    """weight * C / (|C| + eps), C = m conj(r) (m: p conj(m) for a half turn), (Re, Im) float32."""
     if half_turn:
         m_re, m_im = p_re * m_re + p_im * m_im, p_im * m_re - p_re * m_im
     c_re = m_re * r_re + m_im * r_im
@@ -175,10 +169,9 @@ def locate_peak(
     center_px: tuple[float, float] | None = None,
     radius_px: float | None = None,
 ) -> Peak:
-    """The sub-pixel peak of a periodic (H, W) correlation surface (index (i, j): the shift
-    (i, j) mod (H, W)), within `radius_px` (Chebyshev) of `center_px` (rows, cols) when given;
-    the noise is the surface's standard deviation outside a band of rows about the peak, its
-    half-width set by the peak width `smoothing_px` [pixels]."""
+    """The sub-pixel peak of a periodic (H, W) surface ((i, j): the shift (i, j) mod (H, W)),
+    within `radius_px` (Chebyshev) of `center_px` (rows, cols) when given; the noise is measured
+    outside a band of rows about it, as wide as the peak width `smoothing_px` [pixels] sets."""
     h, w = surface.shape
     if center_px is None or radius_px is None:
         i0, j0 = divmod(int(np.argmax(surface)), w)
@@ -193,11 +186,8 @@ def locate_peak(
     exclude = int(np.ceil(PEAK_EXCLUSION_SIGMAS * smoothing_px)) + 1
     noise = float(std_outside_rows(surface, i0, exclude))
     shift = np.array([(i0 + fit[0] + h / 2.0) % h - h / 2.0, (j0 + fit[1] + w / 2.0) % w - w / 2.0])
-    return Peak(
-        shift_px=shift,
-        quality=height / noise if noise > 0 else 0.0,  # a flat surface carries no information
-        curvature=np.array([[fit[2], fit[3]], [fit[3], fit[4]]]),
-    )
+    quality = height / noise if noise > 0 else 0.0  # a flat surface carries no information
+    return Peak(shift, quality, np.array([[fit[2], fit[3]], [fit[3], fit[4]]]))
 
 
 @numba.njit(nogil=True, cache=True)
@@ -217,8 +207,7 @@ def _fit_log_quadratic(surface, i0, j0, floor):  # type: ignore[no-untyped-def] 
     h_cc = logp[1, 2] - 2.0 * logp[1, 1] + logp[1, 0]
     h_rc = 0.25 * (logp[2, 2] - logp[2, 0] - logp[0, 2] + logp[0, 0])
     c_rr, c_rc, c_cc = -h_rr, -h_rc, -h_cc
-    half_trace = 0.5 * (c_rr + c_cc)
-    min_eig = half_trace - math.sqrt((0.5 * (c_rr - c_cc)) ** 2 + c_rc * c_rc)
+    min_eig = 0.5 * (c_rr + c_cc) - math.sqrt((0.5 * (c_rr - c_cc)) ** 2 + c_rc * c_rc)
     d_r = d_c = 0.0
     if min_eig > MIN_CURVATURE:  # solve C d = g (the Newton step on the log surface)
         det = c_rr * c_cc - c_rc * c_rc
@@ -229,8 +218,7 @@ def _fit_log_quadratic(surface, i0, j0, floor):  # type: ignore[no-untyped-def] 
 
 @numba.njit(nogil=True, cache=True, fastmath={"reassoc", "contract"})  # vectorised sums
 def std_outside_rows(surface, i0, exclude):  # type: ignore[no-untyped-def]  # fmt: skip
-    """Standard deviation of the (H, W) surface without the rows within `exclude` of row i0
-    (periodic); 0 when nothing is left."""
+    """Standard deviation of the surface (H, W) beyond `exclude` rows (periodic) of row i0, or 0."""
     h, w = surface.shape
     total = total_sq = 0.0
     count = 0
@@ -275,9 +263,8 @@ ROTATION = RotationSettings()
 
 @dataclass(frozen=True)
 class RotationEstimate:
-    """Rotation of a scan relative to a reference: `angle_rad` in [-pi/2, pi/2) from
-    Fourier-Mellin (or + pi), in [-pi, pi) from a refinement; its standard deviation [rad] and
-    peak-to-noise ratio from the angular correlation peak."""
+    """Rotation of a scan relative to a reference [rad] (in [-pi/2, pi/2) from Fourier-Mellin, in
+    [-pi, pi) from a refinement), its standard deviation and the angular peak's quality."""
 
     angle_rad: float
     sigma_rad: float
@@ -316,8 +303,7 @@ def _log_magnitude(re, im):  # type: ignore[no-untyped-def]  # fmt: skip
 
 @numba.njit(nogil=True, cache=True)
 def _centred_log_magnitude(packed, out):  # type: ignore[no-untyped-def]  # fmt: skip
-    """out (h, w // 2 + 1) = log(1 + |half spectrum|) of a packed spectrum (h, w), rows
-    fftshifted, float32."""
+    """out (h, w // 2 + 1) = log(1 + |half spectrum|) of packed (h, w), rows fftshifted."""
     h, w = packed.shape
     half = h // 2
     for i in range(h):
@@ -393,9 +379,8 @@ def refine_rotation_against(
 
 def _rotation_of_peak(curve: FloatArray, smoothing: float, step_rad: float) -> RotationEstimate:
     """The rotation at the peak of an angular correlation (samples `step_rad` apart, peak width
-    `smoothing` samples), by a parabola through the log of its 3 top samples; minus the shift
-    (a signature's angle runs against a CCW turn; on a `PolarGrid` content d samples further
-    CCW was rendered turned too far by d)."""
+    `smoothing` samples) by a parabola through the log of its top 3, minus the shift (signature
+    angles run against a CCW turn; on a `PolarGrid`, content d further CCW was turned d too far)."""
     n = len(curve)
     i0 = int(np.argmax(curve))
     height = float(curve[i0])
@@ -411,19 +396,15 @@ def _rotation_of_peak(curve: FloatArray, smoothing: float, step_rad: float) -> R
     quality = height / noise if noise > 0 else 0.0
     shift = (i0 + offset + n / 2.0) % n - n / 2.0
     width2 = 1.0 / -second if -second > MIN_CURVATURE else WIDE_PEAK_VARIANCE_PX2  # [sample^2]
-    return RotationEstimate(
-        angle_rad=float(-shift * step_rad),
-        sigma_rad=float(np.sqrt(width2 / max(quality, 1.0) ** 2) * step_rad),
-        quality=float(quality),
-    )
+    sigma_rad = float(np.sqrt(width2 / max(quality, 1.0) ** 2) * step_rad)
+    return RotationEstimate(float(-shift * step_rad), sigma_rad, float(quality))
 
 
 def correlate_1d(
     s_ref: PackedSpectrum, s_mov: PackedSpectrum, n: int, smoothing: float
 ) -> FloatArray:
-    """Summed phase correlation (n,) of row spectra (rows, n), peaking at d when
-    mov(t) = ref(t - d): whitened, summed over rows, without the zero frequency, shaped by a
-    Gaussian of `smoothing` samples."""
+    """Whitened phase correlation (n,) of row spectra (rows, n) summed over rows without the zero
+    frequency, peaking at d when mov(t) = ref(t - d), a Gaussian of `smoothing` samples."""
     summed_re = np.zeros(n // 2 + 1)
     summed_im = np.zeros(n // 2 + 1)
     _summed_cross_power(s_ref, s_mov, summed_re, summed_im)

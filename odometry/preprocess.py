@@ -1,7 +1,6 @@
-"""The radar scan (`Scan`, `RadarFrame`) and its conditioning (uniform sweep, bins averaged, ring
-noise and near range removed); its windowed, rotated Cartesian images, de-skewed by folding a
-constant-velocity motion into the backward warp (range exact for the displacement, bearing to
-second order: under a centimetre beyond 10 m at 10 m/s); the SE(2) twists (docs/method.md)."""
+"""The radar scan, its conditioning, its windowed Cartesian images de-skewed by folding a constant
+velocity into the backward warp (range exact, bearing to second order: under 1 cm beyond 10 m at
+10 m/s) and the SE(2) twists (docs/method.md)."""
 
 from __future__ import annotations
 
@@ -22,8 +21,7 @@ from raplace.warp import CartesianGrid, remap, remap_wrapped
 
 TWO_PI = 2.0 * np.pi
 UNIFORM_SWEEP_TOLERANCE = 0.05
-"""Rows are resampled when an azimuth deviates from the fitted uniform sweep by more than this
-fraction of the azimuth step."""
+"""Rows are resampled when an azimuth is off the fitted uniform sweep by this fraction of a step."""
 MIN_AZIMUTHS = 8
 MAX_UINT16_SUM_FACTOR = 257
 """Up to this many uint8 bins add up in a uint16."""
@@ -36,8 +34,7 @@ FloatImage = NDArray[np.float32]
 
 @runtime_checkable
 class Scan(Protocol):
-    """One radar sweep (any object with these attributes; read-only properties so that frozen
-    dataclasses such as `RadarFrame` match under mypy too)."""
+    """One radar sweep: any object with these read-only properties (frozen dataclasses match)."""
 
     @property
     def timestamp_ns(self) -> int: ...  # reference time [ns]: the time its pose refers to
@@ -119,9 +116,8 @@ class PolarScan:
 
 @dataclass(frozen=True)
 class CartesianLevel:
-    """Per-pixel (x, y, range [m], bearing [rad] CCW from +x) from the sensor at the centre of
-    a `raplace.warp` grid of `cell_m` [m] pixels, and its apodisation window; arrays (size_px,
-    size_px) float32."""
+    """Per-pixel (x, y, range [m], bearing [rad] CCW from +x) from the sensor at the centre of a
+    `raplace.warp` grid of `cell_m` [m] pixels, and its window; arrays (size_px, size_px)."""
 
     cell_m: float
     x_m: FloatImage
@@ -138,8 +134,7 @@ image border out of the spectrum and most of the scene in)."""
 
 @functools.lru_cache(maxsize=8)
 def cartesian_level(cell_m: float, size_px: int) -> CartesianLevel:
-    """The level of `size_px` (even) pixels of `cell_m` [m] (cached); its window is a radial
-    Tukey window (`TAPER_FRACTION`), 0 in the corners."""
+    """The (cached) level of `size_px` (even) pixels of `cell_m` [m]; a radial Tukey window."""
     grid = CartesianGrid(cell_m=cell_m, size_px=size_px)
     x, y = grid.pixel_centres()
     rng = np.hypot(x, y)
@@ -194,8 +189,7 @@ def _row_timing(scan: Scan, source_rows: NDArray[np.float64]) -> RowTiming | Non
 
 
 def preprocess_polar(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
-    """The raw scan conditioned on uniform azimuths with bins of about `cfg.bin_size_m`; raises
-    `OdometryError` on inconsistent shapes, dtype or geometry."""
+    """The scan on uniform azimuths, bins of about `cfg.bin_size_m`; OdometryError if malformed."""
     polar = np.asarray(scan.polar)
     az = np.asarray(scan.azimuths_rad, dtype=np.float64)
     bad = polar.ndim != 2 or az.shape != polar.shape[:1] or polar.dtype != np.uint8
@@ -300,26 +294,14 @@ def sample_scan(
     twist: NDArray[np.float64] | None = None,
     time_offset_s: float = 0.0,
 ) -> FloatImage:
-    """(H, W) float32 intensities of the scan at points (H, W) [m, rad] of the sensor frame at
-    `time_offset_s` [s] after the reference time, turned by `rotation_rad` (CCW) from the scan's
-    frame (bilinear, 0 beyond range); de-skewed with `twist` (3,) (vx, vy [m/s], yaw rate
-    [rad/s]) when given and the scan has azimuth times."""
+    """(H, W) float32 intensities (bilinear, 0 beyond range) at points (H, W) [m, rad] of the
+    sensor frame `time_offset_s` [s] after the reference time, turned by `rotation_rad` (CCW),
+    de-skewed with `twist` (3,) [m/s, m/s, rad/s] when given and the scan has azimuth times."""
     timing = polar.timing
-    bins, rows = sampling_maps(
-        x_m,
-        y_m,
-        range_m,
-        bearing_rad,
-        first_azimuth_rad=polar.first_azimuth_rad,
-        azimuth_step_rad=polar.azimuth_step_rad,
-        n_azimuths=polar.n_azimuths,
-        bin_size_m=polar.bin_size_m,
-        rotation_rad=rotation_rad,
-        twist=twist,
-        timing=None
-        if timing is None
-        else (timing.first_row_s - time_offset_s, timing.row_period_s),
-    )
+    times = None if timing is None else (timing.first_row_s - time_offset_s, timing.row_period_s)
+    sweep = (polar.first_azimuth_rad, polar.azimuth_step_rad, polar.n_azimuths, polar.bin_size_m)
+    points = (x_m, y_m, range_m, bearing_rad)
+    bins, rows = sampling_maps(*points, *sweep, rotation_rad, twist, times)
     return remap_wrapped(polar.wrapped_image, bins, rows)
 
 
@@ -342,7 +324,6 @@ def sampling_maps(
     y_m: FloatImage,
     range_m: FloatImage,
     bearing_rad: FloatImage,
-    *,
     first_azimuth_rad: float,
     azimuth_step_rad: float,
     n_azimuths: int,
@@ -352,10 +333,10 @@ def sampling_maps(
     timing: tuple[float, float] | None = None,
 ) -> tuple[FloatImage, FloatImage]:
     """(bins, rows) float32 maps (H, W) for `raplace.warp.remap` (rows in [0, n]) of pixels at
-    (x, y, range [m], bearing [rad] CCW from +x) (H, W), for a scan of `n_azimuths` rows from
-    `first_azimuth_rad` in signed steps [rad] over a turn and bins of `bin_size_m`, turned by
-    `rotation_rad` (bearing b shows the scan's b - rotation_rad) and de-skewed with `twist` (3,)
-    [m/s, m/s, rad/s] given `timing` (row 0's time and the row period [s]); no de-skew if None."""
+    (x, y, range [m], bearing [rad] CCW from +x) (H, W) of a scan of `n_azimuths` rows from
+    `first_azimuth_rad` in signed steps [rad] and bins of `bin_size_m`, turned by `rotation_rad`
+    (bearing b shows the scan's b - rotation_rad), de-skewed at `twist` (3,) [m/s, m/s, rad/s]
+    given `timing` (row 0's time and the row period [s]); no de-skew when either is None."""
     deskew = False
     t0 = t1 = wx = wy = yaw_rate = 0.0
     if twist is not None and timing is not None and np.any(np.asarray(twist) != 0.0):

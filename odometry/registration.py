@@ -52,13 +52,11 @@ FINE_SEARCH_PX = 6
 """The fine peak is searched within this many fine pixels of the coarse estimate (the coarse
 peak's error is under a coarse pixel, about three fine ones)."""
 MAX_COARSE_FINE_DISAGREEMENT_M = 1.0
-"""Coarse and fine translations further apart [m] fail a registration (the fine peak is another
-structure)."""
+"""Coarse and fine translations further apart [m] fail (the fine peak is another structure)."""
 COARSE_SIZE_PX = 256
 """Side of the coarse image [pixels]: at 0.8 m it spans +-102 m, a Navtech sensor's useful range."""
 FINE_SIZE_PX = 384
-"""Side of the fine image [pixels]: at 0.25 m it spans +-48 m, where returns are dense and sharp
-enough for a sub-pixel translation."""
+"""Side of the fine image [pixels]: +-48 m at 0.25 m, where returns are dense and sharp."""
 MIN_SIGMA_XY_M = 0.01
 """Floor of a registration's translation standard deviation [m] (range resolution, de-skew)."""
 MIN_SIGMA_YAW_DEG = 0.05
@@ -80,11 +78,10 @@ class MotionEstimate:
 
 
 class PreparedScan:
-    """A conditioned scan with the spectra registration needs, each made once on first use. Its
-    images show the scene from the sensor pose at its image time, `image_time_s` [s] after the
-    reference time (mid-sweep; 0 with de-skew off or without azimuth times), at `image_pose` (3,)
-    T_reference_image under `twist` (3,) (vx, vy [m/s], yaw rate [rad/s]; None: as measured,
-    then the pose is zeros). `empty`: nothing is left after conditioning."""
+    """A conditioned scan and the spectra registration needs (each made on first use), seen from
+    its image time `image_time_s` [s] after the reference time (mid-sweep; 0 with de-skew off or
+    no azimuth times), at `image_pose` (3,) T_reference_image under `twist` (3,) [m/s, m/s,
+    rad/s] (None: as measured; pose zeros). `empty`: nothing left after conditioning."""
 
     def __init__(self, polar: PolarScan, twist: FloatArray | None, cfg: OdometryConfig) -> None:
         self.polar = polar
@@ -135,8 +132,7 @@ class PreparedScan:
 
 
 def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) -> PreparedScan:
-    """Condition a scan; `twist` (3,) (vx, vy [m/s], yaw rate [rad/s]) de-skews it unless
-    de-skewing is off or the scan has no azimuth times."""
+    """Condition a scan, de-skewed with `twist` (3,) [m/s, m/s, rad/s] when de-skew is on."""
     polar = preprocess_polar(scan, cfg.preprocess)
     return PreparedScan(polar, twist if cfg.deskew else None, cfg)
 
@@ -152,8 +148,7 @@ def fine_level(cfg: OdometryConfig) -> CartesianLevel:
 def _residual_rotation(
     ref: PreparedScan, cur: PreparedScan, translation: FloatArray, yaw: float
 ) -> RotationEstimate:
-    """Rotation left after rendering `cur` through (translation [m], yaw [rad]) onto the polar
-    grid about `ref`'s sensor."""
+    """Rotation left with `cur` rendered through (translation [m], yaw [rad]) on `ref`'s grid."""
     grid = polar_grid(ROTATION)
     moved = cur._sample(grid.shifted(float(translation[0]), float(translation[1])), yaw)
     return refine_rotation_against(ref.refine_spectrum, moved, ROTATION)
@@ -233,9 +228,8 @@ def register_images(
 def _coarse_translation(
     ref: PreparedScan, cur: PreparedScan, yaw: float, cfg: OdometryConfig, hint: FloatArray | None
 ) -> tuple[Peak, float]:
-    """Coarse translation peak and yaw [rad] with `cur` turned by `yaw`: both half-turn
-    hypotheses, the stronger peak winning; with `hint` (2,) [m] only `yaw`, the peak searched
-    within `HINT_RADIUS_M` of it."""
+    """Coarse translation peak and yaw [rad] of `cur` turned by `yaw` and by a half turn (the
+    stronger wins); with `hint` (2,) [m] only `yaw`, searched within `HINT_RADIUS_M` of it."""
     level = coarse_level(cfg)
     image = cur._render(level, yaw)
     spectrum = forward(image)
@@ -259,8 +253,7 @@ def estimate_motion(
     without it they are registered as measured, then (with azimuth times and de-skew on) again
     de-skewed at the velocity that estimate gives."""
     cfg = OdometryConfig() if cfg is None else cfg
-    ref_polar = preprocess_polar(prev, cfg.preprocess)
-    cur_polar = preprocess_polar(cur, cfg.preprocess)
+    ref_polar, cur_polar = (preprocess_polar(scan, cfg.preprocess) for scan in (prev, cur))
     use_twist = twist if cfg.deskew else None
     estimate = register(
         PreparedScan(ref_polar, use_twist, cfg), PreparedScan(cur_polar, use_twist, cfg), cfg

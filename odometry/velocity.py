@@ -52,9 +52,8 @@ MIN_VERTEX_OFFSET = 0.25
 
 @dataclass(frozen=True)
 class Velocity:
-    """The twist (vx, vy [m/s], yaw rate [rad/s]) measured between two registered image poses,
-    at the middle of that interval (`time_ns`), and the change of its yaw rate since the
-    measurement before (`yaw_rate_change` [rad/s] over `span_s` [s])."""
+    """The twist (vx, vy [m/s], yaw rate [rad/s]) measured between two image poses, at the middle
+    `time_ns`, and its yaw rate's change since the last (`yaw_rate_change` [rad/s], `span_s`)."""
 
     twist: FloatArray
     time_ns: int
@@ -110,8 +109,7 @@ def close_twists(a: FloatArray, b: FloatArray, speed_mps: float, yaw_rate_radps:
 
 
 def agrees(motion: FloatArray, expected: FloatArray) -> bool:
-    """`motion` (3,) is within the prediction tolerances of `expected` (3,) (poses or motions in
-    one frame)."""
+    """`motion` (3,) is within the prediction tolerances of `expected` (3,), in one frame."""
     off = np.asarray(motion, dtype=np.float64) - np.asarray(expected, dtype=np.float64)
     return bool(
         np.hypot(off[0], off[1]) <= PREDICTION_TOLERANCE_M
@@ -196,8 +194,7 @@ def redeskewed(
 def weak_searched(
     ref: PreparedScan, rendered: Rendered, last: float, cfg: OdometryConfig, register: Register
 ) -> Rendered:
-    """`rendered`, or, when its peak is below `WEAK_PEAK_FRACTION` of the previous scan's quality
-    `last`, the scan at the yaw rate `searched` finds."""
+    """`rendered`, or below `WEAK_PEAK_FRACTION` of the previous peak `last`, the `searched` one."""
     scan, estimate = rendered
     strong = estimate.quality >= WEAK_PEAK_FRACTION * last
     if scan.twist is None or not estimate.ok or strong:
@@ -237,10 +234,9 @@ def searched(
     cfg: OdometryConfig,
     register: Register,
 ) -> Rendered:
-    """`scan` and its registration `estimate` against `reference`, or the scan de-skewed at the
-    yaw rate -+ `HALF_WIDTH_DPS` or the parabola's vertex (2-3 registrations seeded with
-    `estimate`) whose peak is stronger by more than `MIN_GAIN` (the peak quality peaks where the
-    scan's de-skew matches the reference image's)."""
+    """`scan` and its `estimate`, or the scan de-skewed at the yaw rate -+ `HALF_WIDTH_DPS` or the
+    parabola's vertex (seeded with `estimate`) whose peak is stronger by over `MIN_GAIN` (peaks
+    are strongest where the scan's de-skew matches the reference image's)."""
     assert scan.twist is not None
     base_twist = scan.twist
 

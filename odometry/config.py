@@ -1,10 +1,5 @@
-"""Settings of the phase-correlation odometry: what a user tunes for a sensor or a vehicle.
-
-`OdometryConfig` is the `odometry:` section of a radar-slam config (`raplace.config_io.merge`
-applies YAML overrides to it; unknown keys are errors, removed keys say what replaced them).
-Everything else the method needs is a named constant beside the code that uses it, with its
-reason. The dataclasses are frozen and hashable, so derived geometry can be cached per config.
-"""
+"""The `odometry:` config section: what a user tunes for a sensor or a vehicle (everything else
+is a named constant beside its code). Frozen and hashable: derived geometry is cached per config."""
 
 from __future__ import annotations
 
@@ -17,23 +12,17 @@ from raplace.config_io import replaced_by_constant
 
 @dataclass(frozen=True)
 class PreprocessConfig:
-    """Polar-scan conditioning before any Cartesian image is made.
+    """Polar-scan conditioning before any Cartesian image is made."""
 
-    Attributes:
-        bin_size_m: range bins are averaged down to about this size [m] (speckle suppression and
-            speed); the finest Cartesian cell should not be smaller.
-        min_range_m: returns nearer than this are zeroed [m] (saturated near range, vehicle body).
-        max_range_m: returns farther than this are dropped [m].
-        ring_noise_removal: subtract each range bin's median over azimuths (constant-range bands
-            that do not move with the vehicle).
-        noise_floor_sigmas: per azimuth, subtract mean + this many standard deviations of the
-            row (a CFAR-like noise floor); negative values disable the floor.
-    """
-
+    # Range bins are averaged down to about this size [m] (speckle, speed); the finest
+    # Cartesian cell should not be smaller.
     bin_size_m: float = 0.2
-    min_range_m: float = 3.0
-    max_range_m: float = 150.0
+    min_range_m: float = 3.0  # nearer returns are zeroed [m] (saturated near range, vehicle)
+    max_range_m: float = 150.0  # farther returns are dropped [m]
+    # Subtract each range bin's median over azimuths (bands that do not move with the vehicle).
     ring_noise_removal: bool = True
+    # Per azimuth, subtract mean + this many standard deviations of the row (a CFAR-like noise
+    # floor); negative values disable the floor.
     noise_floor_sigmas: float = 0.0
 
     def __post_init__(self) -> None:
@@ -46,12 +35,8 @@ class PreprocessConfig:
 
 @dataclass(frozen=True)
 class LevelConfig:
-    """One Cartesian image level (its side in pixels is a constant of the level,
-    `odometry.registration.COARSE_SIZE_PX` and `FINE_SIZE_PX`).
-
-    Attributes:
-        cell_m: pixel size [m].
-    """
+    """One Cartesian image level: `cell_m`, its pixel size [m] (its side in pixels is a constant,
+    `odometry.registration.COARSE_SIZE_PX` and `FINE_SIZE_PX`)."""
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
         "size_px": replaced_by_constant("odometry.registration.COARSE_SIZE_PX, FINE_SIZE_PX"),
@@ -65,31 +50,24 @@ class LevelConfig:
 
 @dataclass(frozen=True)
 class QualityConfig:
-    """When a registration counts as failed, what a vehicle can do, and the covariance scale.
-
-    Attributes:
-        min_peak_quality: minimum peak-to-noise ratio of the translation and rotation peaks.
-        max_speed_mps: a faster motion is never taken as the vehicle's velocity [m/s].
-        max_yaw_rate_dps: a faster rotation is never taken as its yaw rate [deg/s].
-        sigma_scale: multiplies the peak-derived standard deviations (calibration factor).
-    """
+    """When a registration counts as failed, what a vehicle can do, and the covariance scale."""
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
-        "max_prediction_error_m": replaced_by_constant("odometry.recovery.PREDICTION_TOLERANCE_M"),
+        "max_prediction_error_m": replaced_by_constant("odometry.velocity.PREDICTION_TOLERANCE_M"),
         "max_prediction_error_deg": replaced_by_constant(
-            "odometry.recovery.PREDICTION_TOLERANCE_DEG"
+            "odometry.velocity.PREDICTION_TOLERANCE_DEG"
         ),
         "min_sigma_xy_m": replaced_by_constant("odometry.registration.MIN_SIGMA_XY_M"),
         "min_sigma_yaw_deg": replaced_by_constant("odometry.registration.MIN_SIGMA_YAW_DEG"),
-        "velocity_lag_fraction": replaced_by_constant("odometry.uncertainty.VELOCITY_LAG_FRACTION"),
-        "deskew_error_fraction": replaced_by_constant("odometry.uncertainty.DESKEW_ERROR_FRACTION"),
+        "velocity_lag_fraction": replaced_by_constant("odometry.odometry.VELOCITY_LAG_FRACTION"),
+        "deskew_error_fraction": replaced_by_constant("odometry.odometry.DESKEW_ERROR_FRACTION"),
         "sigma_yaw_deg_per_deg": "removed: rotation terms in turns cost SLAM accuracy",
         "deskew_yaw_error_fraction": "removed: rotation terms in turns cost SLAM accuracy",
     }
-    min_peak_quality: float = 6.0
-    max_speed_mps: float = 45.0
-    max_yaw_rate_dps: float = 120.0
-    sigma_scale: float = 3.0
+    min_peak_quality: float = 6.0  # of the translation and rotation peaks (peak-to-noise)
+    max_speed_mps: float = 45.0  # a faster motion is never taken as the velocity [m/s]
+    max_yaw_rate_dps: float = 120.0  # a faster rotation is never taken as its yaw rate [deg/s]
+    sigma_scale: float = 3.0  # multiplies the peak-derived standard deviations (calibration)
 
     def __post_init__(self) -> None:
         for name in ("min_peak_quality", "max_speed_mps", "max_yaw_rate_dps"):
@@ -99,23 +77,17 @@ class QualityConfig:
 
 @dataclass(frozen=True)
 class KeyframeConfig:
-    """When the current keyframe is replaced by the scan just registered (also when the peak
-    falls below `KEYFRAME_QUALITY_FACTOR` times `quality.min_peak_quality`: overlap fading).
-
-    Attributes:
-        max_translation_m: distance from the keyframe [m].
-        max_rotation_deg: rotation from the keyframe [deg].
-        max_frames: at most this many scans are registered against one keyframe.
-    """
+    """When the scan just registered replaces the keyframe (also when the peak falls below
+    `odometry.odometry.KEYFRAME_QUALITY_FACTOR` times `quality.min_peak_quality`)."""
 
     REMOVED_KEYS: ClassVar[dict[str, str]] = {
         "min_peak_quality": replaced_by_constant(
-            "odometry.KEYFRAME_QUALITY_FACTOR, times quality.min_peak_quality"
+            "odometry.odometry.KEYFRAME_QUALITY_FACTOR, times quality.min_peak_quality"
         ),
     }
-    max_translation_m: float = 10.0
-    max_rotation_deg: float = 15.0
-    max_frames: int = 8
+    max_translation_m: float = 10.0  # distance from the keyframe [m]
+    max_rotation_deg: float = 15.0  # rotation from the keyframe [deg]
+    max_frames: int = 8  # at most this many scans are registered against one keyframe
 
     def __post_init__(self) -> None:
         checks.positive("max_translation_m", self.max_translation_m, allow_inf=True)
@@ -123,31 +95,17 @@ class KeyframeConfig:
         checks.at_least("max_frames", self.max_frames, 1)
 
 
-def _coarse() -> LevelConfig:
-    return LevelConfig(cell_m=0.8)
-
-
-def _fine() -> LevelConfig:
-    return LevelConfig(cell_m=0.25)
-
-
 @dataclass(frozen=True)
 class OdometryConfig:
-    """The odometry stage's settings (the `odometry` section of a radar-slam config).
-
-    Attributes:
-        preprocess: conditioning of the polar scan.
-        coarse: the wide, low-resolution image level (global search, rotation).
-        fine: the near, full-resolution level (sub-pixel translation).
-        quality: failure threshold, vehicle limits and covariance scale.
-        keyframe: when the reference scan is renewed.
-        deskew: correct each scan's motion distortion with the running velocity when the scan
-            has per-azimuth times (off: register the scans as measured).
-    """
+    """The odometry stage's settings (the `odometry` section of a radar-slam config)."""
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
-    coarse: LevelConfig = field(default_factory=_coarse)
-    fine: LevelConfig = field(default_factory=_fine)
+    # The wide, low-resolution level (global search, rotation) and the near, full-resolution
+    # one (sub-pixel translation).
+    coarse: LevelConfig = field(default_factory=lambda: LevelConfig(cell_m=0.8))
+    fine: LevelConfig = field(default_factory=lambda: LevelConfig(cell_m=0.25))
     quality: QualityConfig = field(default_factory=QualityConfig)
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
+    # Correct each scan's motion distortion with the running velocity when it has per-azimuth
+    # times (off: register the scans as measured).
     deskew: bool = True

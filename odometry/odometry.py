@@ -8,53 +8,56 @@
 2. Register its image against the keyframe's (`registration.register_images`, coarse and fine
    levels counting as one registration): globally, rotation over the full circle and translation
    over the whole coarse image. When that fails, or its peak is not far above the failure
-   threshold and it lands off the constant-velocity prediction (`recovery.agrees`), register
+   threshold and it lands off the constant-velocity prediction (`velocity.agrees`), register
    again seeded with the prediction; the stronger peak wins. The prediction is a hint, never a
    veto, so a strong registration ends any run of failures.
 3. Measure the velocity between the last two image poses. When it is far from the one the scan
    was rendered with (hard braking, a curvature change), re-render the scan at the measured
-   velocity and register once more (`deskew_choice.redeskewed`).
+   velocity and register once more (`velocity.redeskewed`).
 4. Otherwise, while the yaw rate changes, register the scan de-skewed with the bounded yaw-rate
-   trend too and keep the stronger peak (`deskew_choice.with_trend`): past motion cannot tell a
+   trend too and keep the stronger peak (`velocity.with_trend`): past motion cannot tell a
    turn that tightens from one that ends, the images can. A peak below half the previous scan's
-   (a de-skew far off) has its de-skew yaw rate searched (`deskew_choice.weak_searched`).
+   (a de-skew far off) has its de-skew yaw rate searched (`velocity.weak_searched`).
 5. The pose at the scan's reference time (`OdometryResult.pose`) is its image pose moved by that
    velocity; the move's error does not accumulate. The covariance is the correlation peak's plus
-   the terms the peak cannot show (`uncertainty`).
+   the terms the peak cannot show (`conversion_covariance`, `deskew_covariance`).
 6. The scan becomes the keyframe when it has moved or turned far enough, when the peak weakens
    (overlap fading) or after `max_frames` scans.
 
 When the keyframe cannot be registered the last registered scan is tried (it becomes the
 keyframe); if that fails too the pose is the prediction, flagged as a gap (`ok=False`,
 `gap=True`, a large covariance), and the keyframe stays for the next scan's global search. Only
-the images fail a registration; a motion faster than a vehicle moves, or one across a gap that
-lands off the prediction, is kept but never becomes the velocity (`recovery`). Every scan counts
-its registrations (`OdometryResult.registrations`).
+the images fail a registration; a motion faster than a vehicle moves (`velocity.plausible_twist`),
+or one across a gap that lands off the prediction, is kept but never becomes the velocity nor
+re-renders the scan: the velocity from before is kept until two registered scans in a row
+measure it again. Every scan counts its registrations (`OdometryResult.registrations`).
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryError, deskew_choice, recovery
+from odometry import OdometryError
+from odometry import velocity as motion_model
 from odometry.config import OdometryConfig
-from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.history import OdometryResult, OdometryState, ScanNode
-from odometry.preprocess import preprocess_polar
+from odometry.preprocess import Scan, motion_from_twist, preprocess_polar, twist_from_motion
 from odometry.registration import MotionEstimate, PreparedScan, register_images
-from odometry.scan import Scan
-from odometry.uncertainty import conversion_covariance, deskew_covariance, factor_covariance
 from odometry.velocity import (
     Velocity,
+    agrees,
     bounded_twist,
     image_interval_s,
     image_time_ns,
+    plausible_twist,
     pose_at_reference,
 )
-from raplace.se2 import between, compose
+from raplace.se2 import between, compose, rotate_covariance
 from raplace.units import NS_PER_S
 
 logger = logging.getLogger(__name__)
@@ -66,47 +69,86 @@ braking or acceleration over a 4 Hz interval, with margin)."""
 GAP_SIGMA_YAW_DEG = 5.0
 """The same for its rotation [deg] (a steering change over the interval)."""
 KEYFRAME_QUALITY_FACTOR = 2.0
-"""A peak below this multiple of `quality.min_peak_quality` makes the scan the keyframe (the
-overlap with the keyframe is fading)."""
+"""A peak below this multiple of `quality.min_peak_quality` makes a keyframe (overlap fading)."""
 UNAMBIGUOUS_QUALITY_FACTOR = 5.0
 """A global registration whose peak is at least this multiple of `quality.min_peak_quality` is
 kept without a seeded one even off the prediction: the seeded search found the same motion there
 (docs/decisions.md)."""
+VELOCITY_LAG_FRACTION = 0.25
+"""The error of the velocity that moves a pose to its reference time: this fraction of its last
+change, per axis (it lags an accelerating or turning vehicle)."""
+DESKEW_ERROR_FRACTION = 1.25
+"""A lagging de-skew velocity bends a scan by about its last change times half a sweep; this
+multiple of the bend is the translation standard deviation (the change itself lags)."""
+
+
+@dataclass(frozen=True)
+class OdometryResult:
+    """The odometry's output for one scan (`pose`'s world frame: the first scan's radar frame
+    moved to `start_pose`; poses and motions (3,) are x, y [m], yaw [rad])."""
+
+    index: int  # position of the scan in the sequence registered so far (0-based)
+    timestamp_ns: int  # the scan's reference time [ns] (the time `pose` refers to)
+    pose: FloatArray  # T_world_radar at `timestamp_ns`
+    motion: FloatArray  # this scan's pose in the previous scan's frame (zeros for the first)
+    # (3, 3) covariance [m^2, m rad, rad^2] (x, y, yaw) of `keyframe_motion`, in the previous
+    # scan's axes (so that it also serves, conservatively, for `motion`).
+    covariance: FloatArray
+    # The scan it was registered against: the keyframe, or the last registered scan when the
+    # keyframe failed (itself for the first scan; the keyframe for a gap).
+    keyframe_index: int
+    keyframe_motion: FloatArray  # this scan's pose in that scan's frame
+    is_keyframe: bool  # the scan is the keyframe for the scans that follow
+    ok: bool  # the registration succeeded
+    gap: bool  # the pose is a constant-velocity prediction covering a failed registration
+    quality: float  # peak-to-noise ratio of the translation peak (0 for the first scan or a gap)
+    reason: str = ""  # why the registration failed ("" when ok)
+    registrations: int = 0  # image registrations (`registration.register_images`) run for it
+
+
+@dataclass
+class ScanNode:
+    """A scan: its pose at its reference time and the pose of its image frame (`image_pose`,
+    world), which the registrations chain (a gap's are the prediction); `conversion_covariance`
+    (own axes) is what moving the image pose to the reference time adds to `pose`."""
+
+    index: int
+    pose: FloatArray
+    image_pose: FloatArray
+    scan: PreparedScan
+    frames: int = 0
+    gap: bool = False
+    conversion_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
 
 
 class Odometry:
-    """Phase-correlation radar odometry over a stream of scans.
-
-    Args:
-        config: odometry settings (defaults when None).
-        start_pose: (3,) T_world_radar of the first scan.
-    """
+    """Phase-correlation radar odometry over a scan stream (`start_pose`: (3,) T_world_radar)."""
 
     def __init__(
         self, config: OdometryConfig | None = None, start_pose: ArrayLike = (0.0, 0.0, 0.0)
     ) -> None:
         self.config = OdometryConfig() if config is None else config
         self.start_pose = np.asarray(start_pose, dtype=np.float64).reshape(3)
-        self._state = OdometryState()
+        self._keyframe: ScanNode | None = None
+        self._previous: ScanNode | None = None
+        self._last_registered: ScanNode | None = None  # the last scan that was not a gap
+        self._velocity: Velocity | None = None
+        self._history: list[OdometryResult] = []
+        self._registrations = 0  # image registrations run for the scan being registered
 
     @property
     def results(self) -> list[OdometryResult]:
         """One result per registered scan, in order (as `register` returned them)."""
-        return list(self._state.history)
+        return list(self._history)
 
     def result(self, index: int) -> OdometryResult:
         """Scan `index`'s result as in `results`, without copying the list."""
-        return self._state.history[index]
+        return self._history[index]
 
     @property
     def poses(self) -> FloatArray:
         """(N, 3) T_world_radar of every registered scan (as in `results`)."""
         return np.array([r.pose for r in self.results]).reshape(-1, 3)
-
-    @property
-    def timestamps_ns(self) -> NDArray[np.int64]:
-        """(N,) reference times of the registered scans [ns]."""
-        return np.array([r.timestamp_ns for r in self.results], dtype=np.int64)
 
     @property
     def gaps(self) -> list[int]:
@@ -116,11 +158,8 @@ class Odometry:
     @property
     def longest_gap_run(self) -> int:
         """The most consecutive gaps so far (more than 2 on driven data is a defect)."""
-        best = run = 0
-        for result in self.results:
-            run = run + 1 if result.gap else 0
-            best = max(best, run)
-        return best
+        runs = itertools.groupby(r.gap for r in self.results)
+        return max((len(list(run)) for gap, run in runs if gap), default=0)
 
     @property
     def registrations_per_scan(self) -> float:
@@ -136,33 +175,22 @@ class Odometry:
     @property
     def velocity(self) -> FloatArray | None:
         """(3,) current body velocity estimate (vx, vy [m/s], yaw rate [rad/s]) or None."""
-        state = self._state
-        if state.velocity is None or state.previous is None:
+        if self._velocity is None or self._previous is None:
             return None
-        return self._velocity_at(state.previous.scan.timestamp_ns)
+        return self._velocity_at(self._previous.scan.timestamp_ns)
 
     @property
     def prepared(self) -> PreparedScan | None:
-        """The last registered scan's conditioned form with its spectra (shared: read-only), or
-        None before the first scan."""
-        previous = self._state.previous
-        return None if previous is None else previous.scan
-
-    def reset(self) -> None:
-        """Forget every scan (the next one starts again at `start_pose`)."""
-        self._state = OdometryState()
+        """The last registered scan's conditioned form and spectra (shared: read-only) or None."""
+        return None if self._previous is None else self._previous.scan
 
     def register(self, frame: Scan) -> OdometryResult:
         """Register the next scan; returns its result (`motion` from the previous scan's pose).
-
-        Raises:
-            OdometryError: the scan is malformed or not later than the previous one.
-        """
-        state = self._state
-        state.registrations = 0
-        index = len(state.history)
+        Raises `OdometryError` when the scan is malformed or not later than the previous one."""
+        self._registrations = 0
+        index = len(self._history)
         scan = self._prepare(frame)
-        previous, keyframe = state.previous, state.keyframe
+        previous, keyframe = self._previous, self._keyframe
         if keyframe is None or previous is None:
             return self._start(index, scan)
         dt_s = (scan.timestamp_ns - previous.scan.timestamp_ns) / NS_PER_S
@@ -182,54 +210,49 @@ class Odometry:
         return self._accept(index, scan, reference, estimate, dt_s)
 
     def _fallback(self) -> ScanNode | None:
-        """The scan tried when the keyframe cannot be registered: the last registered scan,
-        nearer in time (None when it is the keyframe)."""
-        state = self._state
-        return None if state.last_registered is state.keyframe else state.last_registered
+        """The last registered scan, tried when the keyframe fails (None: it is the keyframe)."""
+        last = self._last_registered
+        return None if last is self._keyframe else last
 
     def _prepare(self, frame: Scan) -> PreparedScan:
         """Condition a scan and render it, de-skewed at the running velocity without its trend."""
-        state, cfg = self._state, self.config
+        cfg = self.config
         polar = preprocess_polar(frame, cfg.preprocess)
         twist = None
-        if state.velocity is not None and cfg.deskew:
+        if self._velocity is not None and cfg.deskew:
             mid_ns = polar.timestamp_ns + int(round((polar.mid_sweep_s or 0.0) * NS_PER_S))
             twist = self._velocity_at(mid_ns, trend=False)
         return PreparedScan(polar, twist, cfg)
 
     def _start(self, index: int, scan: PreparedScan) -> OdometryResult:
         """The first scan: placed at `start_pose`, the first keyframe."""
-        state = self._state
         start = self.start_pose.copy()
         node = ScanNode(index=index, pose=start, image_pose=start.copy(), scan=scan)
-        state.keyframe = state.previous = state.last_registered = node
-        return self._record(node, np.zeros(3), np.zeros((3, 3)), node, True, 0.0)
+        self._keyframe = self._previous = self._last_registered = node
+        return self._record(node, np.zeros((3, 3)), node, 0.0)
 
     def _predicted_image_pose(
         self, previous: ScanNode, scan: PreparedScan, dt_s: float
     ) -> FloatArray | None:
-        """The image pose (world) the constant-velocity model expects for `scan` (None before
-        any velocity is known)."""
-        velocity = self._state.velocity
-        if velocity is None:
+        """The image pose (world) the constant-velocity model expects for `scan`, or None."""
+        if self._velocity is None:
             return None
-        twist = bounded_twist(velocity.twist, self.config)
+        twist = bounded_twist(self._velocity.twist, self.config)
         interval_s = image_interval_s(previous.scan, scan, dt_s)
         return compose(previous.image_pose, motion_from_twist(twist, interval_s))
 
     def _registered(
         self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
     ) -> MotionEstimate:
-        """`scan`'s image registered against `reference`'s: globally, and when that fails, or
-        has a weaker peak and disagrees with the prediction, also seeded with it; the stronger
-        peak wins."""
+        """`scan`'s image registered against `reference`'s globally and, when that fails or is
+        weaker and off the prediction, seeded with it too; the stronger peak wins."""
         cfg = self.config
         estimate = self._register_images(reference.scan, scan, cfg)
         if predicted is None:
             return estimate
         expected = between(reference.image_pose, predicted)
         strong = estimate.quality >= UNAMBIGUOUS_QUALITY_FACTOR * cfg.quality.min_peak_quality
-        if estimate.ok and (strong or recovery.agrees(estimate.motion, expected, cfg)):
+        if estimate.ok and (strong or agrees(estimate.motion, expected)):
             return estimate
         seeded = self._register_images(reference.scan, scan, cfg, hint=expected)
         if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
@@ -237,153 +260,107 @@ class Odometry:
         return estimate
 
     def _accept(
-        self,
-        index: int,
-        scan: PreparedScan,
-        reference: ScanNode,
-        estimate: MotionEstimate,
-        dt_s: float,
+        self, index: int, scan: PreparedScan, ref: ScanNode, estimate: MotionEstimate, dt_s: float
     ) -> OdometryResult:
-        """Place `scan` by its registration against `reference`; update the velocity and the
-        keyframe."""
-        state = self._state
-        previous, keyframe = state.previous, state.keyframe
+        """Place `scan` by its registration against `ref`; update the velocity and keyframe."""
+        cfg, previous, keyframe = self.config, self._previous, self._keyframe
         assert previous is not None and keyframe is not None
-        if state.velocity is None:
-            self._place_first_images(reference, scan, estimate.motion)
-        # A gap's pose is a guess: measure the velocity from the reference instead.
-        base = reference if previous.gap else previous
+        if self._velocity is None:
+            self._place_first_images(ref, scan, estimate.motion)
+        base = ref if previous.gap else previous  # a gap's pose is a guess
         interval_s = image_interval_s(
             base.scan, scan, (scan.timestamp_ns - base.scan.timestamp_ns) / NS_PER_S
         )
-        image_pose, change = compose(reference.image_pose, estimate.motion), np.zeros(3)
+        image_pose, change = compose(ref.image_pose, estimate.motion), np.zeros(3)
         # A motion faster than a vehicle moves, or across a gap that hid more than the
-        # prediction allows, is no velocity: the one from before is kept (recovery.py).
+        # prediction allows, is no velocity: the one from before is kept.
         measured = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         predicted = self._predicted_image_pose(previous, scan, dt_s) if previous.gap else None
-        smooth = predicted is None or recovery.agrees(image_pose, predicted, self.config)
-        if state.velocity is None or (smooth and recovery.plausible_twist(measured, self.config)):
-            scan, estimate = self._rerendered(reference, base, scan, estimate, interval_s)
-            image_pose = compose(reference.image_pose, estimate.motion)
+        smooth = predicted is None or agrees(image_pose, predicted)
+        if self._velocity is None or (smooth and plausible_twist(measured, cfg)):
+            scan, estimate = self._rerendered(ref, scan, estimate, measured)
+            image_pose = compose(ref.image_pose, estimate.motion)
             change = self._update_velocity(base, scan, image_pose, interval_s)
         else:
             logger.info("scan %d: no velocity measured since scan %d; kept", index, base.index)
-        assert state.velocity is not None
+        velocity = self._velocity
+        assert velocity is not None
         twist = self._velocity_at((image_time_ns(scan) + scan.timestamp_ns) // 2)
         pose = pose_at_reference(image_pose, twist, scan.image_time_s)
-        conversion = conversion_covariance(
-            estimate.covariance,
-            change,
-            scan.image_time_s,
-            image_interval_s(previous.scan, scan, dt_s),
-        )
+        step_s = image_interval_s(previous.scan, scan, dt_s)
+        conversion = conversion_covariance(estimate.covariance, change, scan.image_time_s, step_s)
         node = ScanNode(index, pose, image_pose, scan, conversion_covariance=conversion)
-        covariance = factor_covariance(
-            estimate.covariance + deskew_covariance(change, scan),
-            reference.pose,
-            reference.image_pose,
-            pose,
-            conversion,
-            float(between(previous.pose, reference.pose)[2]),
-            previous.conversion_covariance,
+        registration = estimate.covariance + deskew_covariance(change, scan)
+        covariance = factor_covariance(registration, ref, node, previous)
+        kcfg, motion = cfg.keyframe, estimate.motion
+        new_keyframe = bool(
+            ref is not keyframe
+            or np.hypot(motion[0], motion[1]) >= kcfg.max_translation_m
+            or abs(motion[2]) >= np.deg2rad(kcfg.max_rotation_deg)
+            or estimate.quality < KEYFRAME_QUALITY_FACTOR * cfg.quality.min_peak_quality
+            or keyframe.frames + 1 >= kcfg.max_frames
         )
-        new_keyframe = reference is not keyframe or self._needs_keyframe(estimate, keyframe)
         if new_keyframe:
-            node.scan = deskew_choice.refreshed(node.scan, state.velocity, self.config)
-            state.keyframe = node
+            node.scan = motion_model.refreshed(node.scan, velocity, cfg)
+            self._keyframe = node
         else:
             keyframe.frames += 1
             if keyframe.scan.twist is None:  # rendered before any velocity was known
-                keyframe.scan = deskew_choice.refreshed(keyframe.scan, state.velocity, self.config)
-        state.previous = state.last_registered = node
-        motion = between(previous.pose, pose)
-        return self._record(node, motion, covariance, reference, new_keyframe, estimate.quality)
+                keyframe.scan = motion_model.refreshed(keyframe.scan, velocity, cfg)
+        self._previous = self._last_registered = node
+        return self._record(node, covariance, ref, estimate.quality)
 
     def _rerendered(
-        self,
-        reference: ScanNode,
-        base: ScanNode,
-        scan: PreparedScan,
-        estimate: MotionEstimate,
-        interval_s: float,
+        self, ref: ScanNode, scan: PreparedScan, estimate: MotionEstimate, measured: FloatArray
     ) -> tuple[PreparedScan, MotionEstimate]:
-        """The scan's de-skew after steps 3 and 4 of the module docstring (the velocity measured
-        since `base`, `interval_s` [s] before)."""
-        velocity, cfg, register = self._state.velocity, self.config, self._register_images
-        rendered = deskew_choice.redeskewed(
-            reference, base, (scan, estimate), interval_s, velocity, cfg, register
-        )
-        if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
-            rendered = deskew_choice.with_trend(reference, scan, estimate, velocity, cfg, register)
+        """The scan's de-skew after steps 3-4 of the module docstring (`measured`: (3,) twist)."""
+        velocity, cfg, register = self._velocity, self.config, self._register_images
         if velocity is None:
-            return rendered
-        last_quality = self._state.history[-1].quality
-        return deskew_choice.weak_searched(reference, rendered, last_quality, cfg, register)
+            return scan, estimate
+        rendered = motion_model.redeskewed(ref.scan, (scan, estimate), measured, cfg, register)
+        if rendered[0] is scan:  # the velocity held: the yaw-rate trend may still win
+            rendered = motion_model.with_trend(ref.scan, scan, estimate, velocity, cfg, register)
+        last_quality = self._history[-1].quality
+        return motion_model.weak_searched(ref.scan, rendered, last_quality, cfg, register)
 
-    def _register_images(
-        self,
-        reference: PreparedScan,
-        scan: PreparedScan,
-        cfg: OdometryConfig,
-        hint: FloatArray | None = None,
-    ) -> MotionEstimate:
+    def _register_images(self, *args: Any, **kwargs: Any) -> MotionEstimate:
         """`registration.register_images`, counted in the scan's result (`registrations`)."""
-        self._state.registrations += 1
-        return register_images(reference, scan, cfg, hint)
+        self._registrations += 1
+        return register_images(*args, **kwargs)
 
-    def _place_first_images(
-        self, reference: ScanNode, scan: PreparedScan, image_motion: FloatArray
-    ) -> None:
+    def _place_first_images(self, ref: ScanNode, scan: PreparedScan, motion: FloatArray) -> None:
         """Place the image frames of the scans registered before any velocity was known (their
         poses are fixed; where their mid-sweep images were seen from needs the velocity)."""
-        state = self._state
-        dt_s = (scan.timestamp_ns - reference.scan.timestamp_ns) / NS_PER_S
-        twist = twist_from_motion(image_motion, image_interval_s(reference.scan, scan, dt_s))
-        for node in {id(n): n for n in (state.keyframe, state.previous, reference) if n}.values():
+        dt_s = (scan.timestamp_ns - ref.scan.timestamp_ns) / NS_PER_S
+        twist = twist_from_motion(motion, image_interval_s(ref.scan, scan, dt_s))
+        for node in {id(n): n for n in (self._keyframe, self._previous, ref) if n}.values():
             node.image_pose = compose(node.pose, motion_from_twist(twist, node.scan.image_time_s))
 
     def _velocity_at(self, time_ns: int, trend: bool = True) -> FloatArray:
-        """`deskew_choice.expected_twist` of the running velocity at `time_ns`."""
-        assert self._state.velocity is not None
-        return deskew_choice.expected_twist(self._state.velocity, time_ns, self.config, trend)
+        """`velocity.expected_twist` of the running velocity at `time_ns`."""
+        assert self._velocity is not None
+        return motion_model.expected_twist(self._velocity, time_ns, self.config, trend)
 
     def _update_velocity(
         self, base: ScanNode, scan: PreparedScan, image_pose: FloatArray, interval_s: float
     ) -> FloatArray:
-        """Measure the twist from `base`'s image pose to `image_pose` (`interval_s` apart);
-        returns its change from the last measurement (zeros for the first)."""
-        state = self._state
+        """Measure the twist from `base`'s image pose to `image_pose`; returns its change (or 0)."""
         twist = twist_from_motion(between(base.image_pose, image_pose), interval_s)
         centre_ns = (image_time_ns(base.scan) + image_time_ns(scan)) // 2
-        if state.velocity is None:
-            state.velocity = Velocity(twist=twist, time_ns=centre_ns)
+        if self._velocity is None:
+            self._velocity = Velocity(twist=twist, time_ns=centre_ns)
             return np.zeros(3)
-        change = twist - state.velocity.twist
-        state.velocity = state.velocity.updated(twist, centre_ns)
+        change = twist - self._velocity.twist
+        self._velocity = self._velocity.updated(twist, centre_ns)
         return change
 
-    def _needs_keyframe(self, estimate: MotionEstimate, keyframe: ScanNode) -> bool:
-        kcfg, motion = self.config.keyframe, estimate.motion
-        return bool(
-            np.hypot(motion[0], motion[1]) >= kcfg.max_translation_m
-            or abs(motion[2]) >= np.deg2rad(kcfg.max_rotation_deg)
-            or estimate.quality < KEYFRAME_QUALITY_FACTOR * self.config.quality.min_peak_quality
-            or keyframe.frames + 1 >= kcfg.max_frames
-        )
-
     def _gap(
-        self,
-        index: int,
-        scan: PreparedScan,
-        predicted: FloatArray | None,
-        failed: MotionEstimate,
+        self, index: int, scan: PreparedScan, predicted: FloatArray | None, failed: MotionEstimate
     ) -> OdometryResult:
-        """Cover a failed registration with the constant-velocity prediction (standing still
-        before any velocity is known); the keyframe stays."""
-        state = self._state
-        previous, keyframe = state.previous, state.keyframe
+        """Cover a failed registration with the constant-velocity prediction; the keyframe stays."""
+        previous, keyframe = self._previous, self._keyframe
         assert previous is not None and keyframe is not None
-        if predicted is None or state.velocity is None:
+        if predicted is None:  # no velocity yet
             pose, image_pose = previous.pose.copy(), previous.pose.copy()
         else:
             twist = self._velocity_at((image_time_ns(scan) + scan.timestamp_ns) // 2)
@@ -391,37 +368,66 @@ class Odometry:
         logger.warning("scan %d: registration failed (%s); gap", index, failed.reason)
         sigma_yaw = np.deg2rad(GAP_SIGMA_YAW_DEG)
         covariance = np.diag([GAP_SIGMA_XY_M**2, GAP_SIGMA_XY_M**2, sigma_yaw**2])
-        node = ScanNode(index=index, pose=pose, image_pose=image_pose, scan=scan, gap=True)
-        motion = between(previous.pose, pose)
-        state.previous = node
-        return self._record(node, motion, covariance, keyframe, False, 0.0, failed.reason)
+        node = ScanNode(index, pose, image_pose, scan, gap=True)
+        self._previous = node
+        return self._record(node, covariance, keyframe, 0.0, failed.reason)
 
     def _record(
-        self,
-        node: ScanNode,
-        motion: FloatArray,
-        covariance: FloatArray,
-        keyframe: ScanNode,
-        is_keyframe: bool,
-        quality: float,
-        reason: str = "",
+        self, node: ScanNode, cov: FloatArray, keyframe: ScanNode, quality: float, reason: str = ""
     ) -> OdometryResult:
-        """Append and return the result of scan `node` (registered against `keyframe`; a gap
-        when `reason` says why it failed)."""
+        """Append and return `node`'s result against `keyframe` (`reason`: why a gap failed)."""
+        history = self._history
+        motion = between(history[-1].pose, node.pose) if history else np.zeros(3)
         result = OdometryResult(
             index=node.index,
             timestamp_ns=node.scan.timestamp_ns,
             pose=np.asarray(node.pose, dtype=np.float64),
             motion=np.asarray(motion, dtype=np.float64),
-            covariance=np.asarray(covariance, dtype=np.float64),
+            covariance=np.asarray(cov, dtype=np.float64),
             keyframe_index=keyframe.index,
             keyframe_motion=np.asarray(between(keyframe.pose, node.pose), dtype=np.float64),
-            is_keyframe=is_keyframe,
+            is_keyframe=self._keyframe is node,
             ok=not node.gap,
             gap=node.gap,
             quality=float(quality),
             reason=reason,
-            registrations=self._state.registrations,
+            registrations=self._registrations,
         )
-        self._state.history.append(result)
+        history.append(result)
         return result
+
+
+def conversion_covariance(
+    registration: FloatArray, change: ArrayLike, image_time_s: float, interval_s: float
+) -> FloatArray:
+    """(3, 3) covariance (scan axes) of moving the image pose by the velocity over `image_time_s`
+    [s]: that of two image poses `interval_s` [s] apart (twice `registration` over the interval
+    squared) lagging by `VELOCITY_LAG_FRACTION` of its last `change` (3,) [m/s, m/s, rad/s]."""
+    if image_time_s == 0.0 or interval_s <= 0:
+        return np.zeros((3, 3))
+    lag = VELOCITY_LAG_FRACTION * np.asarray(change, dtype=float)
+    velocity_covariance = 2.0 * registration / interval_s**2 + np.diag(lag * lag)
+    return image_time_s**2 * velocity_covariance
+
+
+def deskew_covariance(velocity_change: ArrayLike, scan: PreparedScan) -> FloatArray:
+    """(3, 3) isotropic translation covariance [m^2] of the bend of a scan de-skewed with a
+    velocity lagging by its last change `velocity_change` (3,) [m/s, m/s, rad/s]."""
+    timing = scan.polar.timing
+    half_sweep_s = 0.0 if timing is None else 0.5 * scan.polar.n_azimuths * timing.row_period_s
+    bend = half_sweep_s * np.abs(np.asarray(velocity_change, dtype=float))
+    sigma_xy_sq = DESKEW_ERROR_FRACTION**2 * float(bend[0] ** 2 + bend[1] ** 2)
+    return np.diag([sigma_xy_sq, sigma_xy_sq, 0.0])
+
+
+def factor_covariance(
+    registration: FloatArray, reference: ScanNode, node: ScanNode, previous: ScanNode
+) -> FloatArray:
+    """(3, 3) covariance (`previous`'s axes) of the factor from `previous` to `node`: the
+    `registration` against `reference` (axes of its image pose) plus both scans'
+    `conversion_covariance` (own axes)."""
+    in_reference_axes = rotate_covariance(
+        registration, float(between(reference.pose, reference.image_pose)[2])
+    ) + rotate_covariance(node.conversion_covariance, float(between(reference.pose, node.pose)[2]))
+    previous_turn = float(between(previous.pose, reference.pose)[2])
+    return rotate_covariance(in_reference_axes, previous_turn) + previous.conversion_covariance

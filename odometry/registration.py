@@ -1,13 +1,6 @@
-"""Scan-to-scan registration by phase correlation (PhaRaO-style), as pure functions.
-
-`register(ref, cur, cfg)`: the pose of `cur` in `ref`'s frame (dx, dy [m], dyaw [rad]; x forward,
-y left, yaw CCW) between the scans' reference times, from `register_images` between their
-de-skewed image frames (`PreparedScan`). Rotation by Fourier-Mellin on the coarse level (modulo
-pi, `odometry.rotation`); `cur` re-rendered turned into `ref`'s orientation and both half turns
-phase correlated on the coarse level; the rotation refined on a polar grid; the translation
-refined on the fine level. Peak qualities and coarse/fine agreement decide `ok`; the covariance
-comes from the peaks' widths and heights.
-"""
+"""Scan-to-scan registration by phase correlation (PhaRaO-style) as pure functions: rotation by
+Fourier-Mellin, both half turns correlated on the coarse level, the rotation refined on a polar
+grid, the translation on the fine level (docs/method.md; its use: `odometry.odometry`)."""
 
 from __future__ import annotations
 
@@ -20,27 +13,32 @@ import numpy as np
 from numpy.typing import NDArray
 
 from odometry.config import OdometryConfig
-from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.phase_correlation import PackedSpectrum, Peak, correlate, forward, locate_peak
-from odometry.preprocess import (
-    CartesianLevel,
-    PolarScan,
-    cartesian_level,
-    preprocess_polar,
-    render_cartesian,
-    sample_scan,
-)
-from odometry.rotation import (
+from odometry.phase_correlation import (
     ROTATION,
+    PackedSpectrum,
+    Peak,
+    Points,
     RotationEstimate,
-    Signature,
-    angular_spectrum,
+    correlate,
     estimate_rotation,
+    forward,
+    forward_rows,
+    locate_peak,
     polar_grid,
     refine_rotation_against,
     signature,
 )
-from odometry.scan import Scan
+from odometry.preprocess import (
+    CartesianLevel,
+    PolarScan,
+    Scan,
+    cartesian_level,
+    motion_from_twist,
+    preprocess_polar,
+    render_cartesian,
+    sample_scan,
+    twist_from_motion,
+)
 from raplace.se2 import compose, inverse, rotate_covariance, wrap_angle
 from raplace.units import NS_PER_S
 
@@ -48,22 +46,17 @@ logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 F32 = NDArray[np.float32]
-Points = tuple[F32, F32, F32, F32]
-"""(x, y, range, bearing) [m, rad] of points, each (H, W) float32."""
 PEAK_SMOOTHING_PX = 1.0
 """Gaussian width [pixels] of a translation peak, so that a 3 x 3 fit locates it sub-pixel."""
 FINE_SEARCH_PX = 6
 """The fine peak is searched within this many fine pixels of the coarse estimate (the coarse
 peak's error is under a coarse pixel, about three fine ones)."""
 MAX_COARSE_FINE_DISAGREEMENT_M = 1.0
-"""Coarse and fine translations further apart than this [m] fail a registration (more than a
-coarse pixel: the fine peak is another structure)."""
+"""Coarse and fine translations further apart [m] fail (the fine peak is another structure)."""
 COARSE_SIZE_PX = 256
-"""Side of the coarse image [pixels]: at the default 0.8 m it spans +-102 m, the useful range of
-a Navtech sensor."""
+"""Side of the coarse image [pixels]: at 0.8 m it spans +-102 m, a Navtech sensor's useful range."""
 FINE_SIZE_PX = 384
-"""Side of the fine image [pixels]: at the default 0.25 m it spans +-48 m, the near range where
-returns are dense and sharp enough for a sub-pixel translation."""
+"""Side of the fine image [pixels]: +-48 m at 0.25 m, where returns are dense and sharp."""
 MIN_SIGMA_XY_M = 0.01
 """Floor of a registration's translation standard deviation [m] (range resolution, de-skew)."""
 MIN_SIGMA_YAW_DEG = 0.05
@@ -75,39 +68,20 @@ hint's translation: the error of a constant-velocity prediction at 1 Hz."""
 
 @dataclass(frozen=True)
 class MotionEstimate:
-    """Relative motion between two scans.
+    """Relative motion between two scans (a caller must not use `motion` unless `ok`)."""
 
-    Attributes:
-        motion: (3,) pose of the current scan in the reference scan's frame (dx, dy [m], dyaw
-            [rad]).
-        covariance: (3, 3) covariance of `motion` [m^2, m rad, rad^2], order (x, y, yaw).
-        quality: peak-to-noise ratio of the final translation peak (higher is better).
-        ok: True when every check passed; a caller must not use `motion` when False.
-        reason: why the estimate failed ("" when ok).
-    """
-
-    motion: FloatArray
-    covariance: FloatArray
-    quality: float
-    ok: bool
-    reason: str = ""
+    motion: FloatArray  # (3,) the current scan's pose in the reference's frame (dx, dy [m], dyaw)
+    covariance: FloatArray  # (3, 3) of `motion` [m^2, m rad, rad^2], order (x, y, yaw)
+    quality: float  # peak-to-noise ratio of the final translation peak
+    ok: bool  # every check passed
+    reason: str = ""  # why the estimate failed ("" when ok)
 
 
 class PreparedScan:
-    """A conditioned scan with the spectra registration needs, each made once on first use.
-
-    The images show the scene from the sensor pose at the scan's *image time*: mid-sweep when
-    the scan is de-skewed (a velocity error then only smears the image symmetrically), the
-    reference time otherwise.
-
-    Attributes:
-        polar: the conditioned polar scan.
-        twist: (3,) body velocity used for de-skewing (None: as measured).
-        image_time_s: image time relative to the scan's reference time [s] (0 without de-skew
-            or azimuth times).
-        image_pose: (3,) T_reference_image under `twist` (zeros without a twist).
-        empty: nothing is left after conditioning (the scan cannot be registered).
-    """
+    """A conditioned scan and the spectra registration needs (each made on first use), seen from
+    its image time `image_time_s` [s] after the reference time (mid-sweep; 0 with de-skew off or
+    no azimuth times), at `image_pose` (3,) T_reference_image under `twist` (3,) [m/s, m/s,
+    rad/s] (None: as measured; pose zeros). `empty`: nothing left after conditioning."""
 
     def __init__(self, polar: PolarScan, twist: FloatArray | None, cfg: OdometryConfig) -> None:
         self.polar = polar
@@ -126,44 +100,39 @@ class PreparedScan:
     def timestamp_ns(self) -> int:
         return self.polar.timestamp_ns
 
-    def _render(self, level: CartesianLevel, rotation_rad: float) -> NDArray[np.float32]:
+    def _render(self, level: CartesianLevel, rotation_rad: float) -> F32:
         """The scan's windowed image on `level`, turned by `rotation_rad`, at its image time."""
         return render_cartesian(self.polar, level, rotation_rad, self.twist, self.image_time_s)
 
-    def _sample(self, points: Points, rotation_rad: float) -> NDArray[np.float32]:
-        """The scan sampled at (x, y, range, bearing) points of its image frame."""
+    def _sample(self, points: Points, rotation_rad: float) -> F32:
+        """The scan sampled at (x, y, range, bearing) points (each (H, W)) of its image frame."""
         return sample_scan(self.polar, *points, rotation_rad, self.twist, self.image_time_s)
 
     @functools.cached_property
     def coarse_spectrum(self) -> PackedSpectrum:
-        """Packed spectrum of the unrotated coarse image."""
         return forward(self._render(coarse_level(self.cfg), 0.0))
 
     @functools.cached_property
-    def rotation_signature(self) -> Signature:
-        """Fourier-Mellin signature of the coarse image."""
+    def rotation_signature(self) -> PackedSpectrum:
         return signature(self.coarse_spectrum, ROTATION)
 
     @functools.cached_property
     def fine_spectrum(self) -> PackedSpectrum:
-        """Packed spectrum of the unrotated fine image (for a reference)."""
         return forward(self._render(fine_level(self.cfg), 0.0))
 
     @functools.cached_property
-    def refine_image(self) -> NDArray[np.float32]:
-        """The scan on the rotation-refinement polar grid (for a reference)."""
+    def refine_image(self) -> F32:
+        """The scan on the rotation-refinement polar grid."""
         grid = polar_grid(ROTATION)
         return self._sample((grid.x_m, grid.y_m, grid.range_m, grid.bearing_rad), 0.0)
 
     @functools.cached_property
     def refine_spectrum(self) -> PackedSpectrum:
-        """`angular_spectrum` of `refine_image`."""
-        return angular_spectrum(self.refine_image)
+        return forward_rows(self.refine_image)
 
 
 def prepare(scan: Scan, cfg: OdometryConfig, twist: FloatArray | None = None) -> PreparedScan:
-    """Condition a scan; `twist` (3,) (vx, vy [m/s], yaw rate [rad/s]) de-skews it unless
-    de-skewing is off or the scan has no azimuth times."""
+    """Condition a scan, de-skewed with `twist` (3,) [m/s, m/s, rad/s] when de-skew is on."""
     polar = preprocess_polar(scan, cfg.preprocess)
     return PreparedScan(polar, twist if cfg.deskew else None, cfg)
 
@@ -177,10 +146,9 @@ def fine_level(cfg: OdometryConfig) -> CartesianLevel:
 
 
 def _residual_rotation(
-    ref: PreparedScan, cur: PreparedScan, translation: FloatArray, yaw: float, cfg: OdometryConfig
+    ref: PreparedScan, cur: PreparedScan, translation: FloatArray, yaw: float
 ) -> RotationEstimate:
-    """Rotation left after rendering `cur` through (translation [m], yaw [rad]) onto the polar
-    grid about `ref`'s sensor."""
+    """Rotation left with `cur` rendered through (translation [m], yaw [rad]) on `ref`'s grid."""
     grid = polar_grid(ROTATION)
     moved = cur._sample(grid.shifted(float(translation[0]), float(translation[1])), yaw)
     return refine_rotation_against(ref.refine_spectrum, moved, ROTATION)
@@ -203,18 +171,12 @@ def register(
 
 
 def register_images(
-    ref: PreparedScan,
-    cur: PreparedScan,
-    cfg: OdometryConfig,
-    hint: FloatArray | None = None,
+    ref: PreparedScan, cur: PreparedScan, cfg: OdometryConfig, hint: FloatArray | None = None
 ) -> MotionEstimate:
-    """Pose of `cur`'s image frame in `ref`'s (covariance in `ref`'s image frame).
-
-    Without `hint` the search is global (rotation over the full circle, translation anywhere in
-    the coarse image). With `hint` (3,) (dx, dy [m], dyaw [rad]) the rotation starts from the
-    hint's yaw and the coarse peak is searched within `HINT_RADIUS_M` of its translation; the
-    caller compares the two by peak quality (a hint never overrules the images).
-    """
+    """Pose of `cur`'s image frame in `ref`'s (covariance in `ref`'s image frame): a global search
+    without `hint`; with `hint` (3,) (dx, dy [m], dyaw [rad]) the rotation starts from its yaw
+    and the coarse peak is searched within `HINT_RADIUS_M` of its translation (the caller
+    compares the two by peak quality: a hint never overrules the images)."""
     cell = coarse_level(cfg).cell_m
     if hint is None:
         rotation = estimate_rotation(ref.rotation_signature, cur.rotation_signature, ROTATION)
@@ -231,53 +193,8 @@ def register_images(
                 # The translation again at the refined yaw (near the last one), then the rotation.
                 coarse_peak, yaw = _coarse_translation(ref, cur, yaw, cfg, t_coarse)
                 t_coarse = coarse_peak.shift_px * cell
-            rotation = _residual_rotation(ref, cur, t_coarse, yaw, cfg)
+            rotation = _residual_rotation(ref, cur, t_coarse, yaw)
             yaw = float(wrap_angle(yaw + rotation.angle_rad))
-    peak, cell = _fine_translation(ref, cur, t_coarse, yaw, cfg)
-    translation = peak.shift_px * cell
-    motion = np.array([translation[0], translation[1], yaw])
-    # Only the images fail a registration (a prior is a hint, never a veto).
-    reason = _failure_reason(ref, cur, rotation, coarse_peak, peak, t_coarse, motion, cfg)
-    if reason:
-        logger.debug("registration failed: %s (motion %s)", reason, motion)
-    qcfg = cfg.quality
-    cov = np.zeros((3, 3))
-    cov[:2, :2] = peak.covariance_px() * cell**2 * qcfg.sigma_scale**2
-    cov[:2, :2] += np.eye(2) * MIN_SIGMA_XY_M**2
-    cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(MIN_SIGMA_YAW_DEG) ** 2
-    return MotionEstimate(motion, cov, float(peak.quality), not reason, reason)
-
-
-def _coarse_translation(
-    ref: PreparedScan,
-    cur: PreparedScan,
-    angle_rad: float,
-    cfg: OdometryConfig,
-    hint_xy: FloatArray | None,
-) -> tuple[Peak, float]:
-    """Coarse translation peak and yaw [rad] with `cur` turned by `angle_rad`: both half-turn
-    hypotheses, the stronger peak winning; with `hint_xy` (2,) [m] only `angle_rad`, the peak
-    searched within `HINT_RADIUS_M` of it."""
-    level = coarse_level(cfg)
-    image = cur._render(level, angle_rad)
-    spectrum = forward(image)
-    turns = (0.0, np.pi) if hint_xy is None else (0.0,)
-    centre = None if hint_xy is None else (hint_xy[0] / level.cell_m, hint_xy[1] / level.cell_m)
-    radius = None if hint_xy is None else HINT_RADIUS_M / level.cell_m
-    hypotheses = []
-    for turn in turns:
-        surface = correlate(
-            ref.coarse_spectrum, spectrum, image.shape, PEAK_SMOOTHING_PX, turn != 0.0
-        )
-        hypotheses.append((locate_peak(surface, PEAK_SMOOTHING_PX, centre, radius), turn))
-    peak, turn = max(hypotheses, key=lambda h: h[0].quality)
-    return peak, float(wrap_angle(angle_rad + turn))
-
-
-def _fine_translation(
-    ref: PreparedScan, cur: PreparedScan, t_coarse: FloatArray, yaw: float, cfg: OdometryConfig
-) -> tuple[Peak, float]:
-    """The fine level's translation peak near the coarse estimate, and the fine cell [m]."""
     level = fine_level(cfg)
     fine = cur._render(level, yaw)
     centre = t_coarse / level.cell_m
@@ -285,60 +202,58 @@ def _fine_translation(
     peak = locate_peak(
         surface, PEAK_SMOOTHING_PX, (float(centre[0]), float(centre[1])), FINE_SEARCH_PX
     )
-    return peak, level.cell_m
-
-
-def _failure_reason(
-    ref: PreparedScan,
-    cur: PreparedScan,
-    rotation: RotationEstimate,
-    coarse_peak: Peak,
-    peak: Peak,
-    t_coarse: FloatArray,
-    motion: FloatArray,
-    cfg: OdometryConfig,
-) -> str:
-    """Why the images do not support a registration ("" when every check passes)."""
+    translation = peak.shift_px * level.cell_m
+    motion = np.array([translation[0], translation[1], yaw])
+    # Only the images fail a registration (a prior is a hint, never a veto).
     qcfg = cfg.quality
+    weakest = min(peak.quality, coarse_peak.quality)
+    reason = ""
     if ref.empty or cur.empty:
-        return "a scan is empty after conditioning"
-    if rotation.quality < qcfg.min_peak_quality:
-        return f"weak rotation peak (quality {rotation.quality:.1f})"
-    if min(peak.quality, coarse_peak.quality) < qcfg.min_peak_quality:
-        return f"weak translation peak (quality {min(peak.quality, coarse_peak.quality):.1f})"
-    if np.hypot(*(motion[:2] - t_coarse)) > MAX_COARSE_FINE_DISAGREEMENT_M:
-        return f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
-    return ""
+        reason = "a scan is empty after conditioning"
+    elif rotation.quality < qcfg.min_peak_quality:
+        reason = f"weak rotation peak (quality {rotation.quality:.1f})"
+    elif weakest < qcfg.min_peak_quality:
+        reason = f"weak translation peak (quality {weakest:.1f})"
+    elif np.hypot(*(motion[:2] - t_coarse)) > MAX_COARSE_FINE_DISAGREEMENT_M:
+        reason = f"coarse and fine translations disagree ({t_coarse} vs {motion[:2]})"
+    if reason:
+        logger.debug("registration failed: %s (motion %s)", reason, motion)
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = peak.covariance_px() * level.cell_m**2 * qcfg.sigma_scale**2
+    cov[:2, :2] += np.eye(2) * MIN_SIGMA_XY_M**2
+    cov[2, 2] = (qcfg.sigma_scale * rotation.sigma_rad) ** 2 + np.deg2rad(MIN_SIGMA_YAW_DEG) ** 2
+    return MotionEstimate(motion, cov, float(peak.quality), not reason, reason)
 
 
-def kinematic_reason(twist: FloatArray, cfg: OdometryConfig) -> str:
-    """Why the body twist (vx, vy [m/s], yaw rate [rad/s]) is faster than the vehicle can move
-    or turn; "" when it is not."""
-    qcfg = cfg.quality
-    speed = float(np.hypot(twist[0], twist[1]))
-    if speed > qcfg.max_speed_mps:
-        return f"implausible speed {speed:.1f} m/s"
-    yaw_rate_dps = float(np.rad2deg(abs(twist[2])))
-    if yaw_rate_dps > qcfg.max_yaw_rate_dps:
-        return f"implausible yaw rate {yaw_rate_dps:.1f} deg/s"
-    return ""
+def _coarse_translation(
+    ref: PreparedScan, cur: PreparedScan, yaw: float, cfg: OdometryConfig, hint: FloatArray | None
+) -> tuple[Peak, float]:
+    """Coarse translation peak and yaw [rad] of `cur` turned by `yaw` and by a half turn (the
+    stronger wins); with `hint` (2,) [m] only `yaw`, searched within `HINT_RADIUS_M` of it."""
+    level = coarse_level(cfg)
+    image = cur._render(level, yaw)
+    spectrum = forward(image)
+    turns = (0.0, np.pi) if hint is None else (0.0,)
+    centre = None if hint is None else (hint[0] / level.cell_m, hint[1] / level.cell_m)
+    radius = None if hint is None else HINT_RADIUS_M / level.cell_m
+    hypotheses = []
+    for turn in turns:
+        surface = correlate(
+            ref.coarse_spectrum, spectrum, image.shape, PEAK_SMOOTHING_PX, turn != 0.0
+        )
+        hypotheses.append((locate_peak(surface, PEAK_SMOOTHING_PX, centre, radius), turn))
+    peak, turn = max(hypotheses, key=lambda h: h[0].quality)
+    return peak, float(wrap_angle(yaw + turn))
 
 
 def estimate_motion(
-    prev: Scan,
-    cur: Scan,
-    cfg: OdometryConfig | None = None,
-    twist: FloatArray | None = None,
+    prev: Scan, cur: Scan, cfg: OdometryConfig | None = None, twist: FloatArray | None = None
 ) -> MotionEstimate:
-    """Pose of scan `cur` in the frame of scan `prev` (check `ok` before using it).
-
-    `twist` (3,) de-skews both scans; without it they are registered as measured and, when both
-    carry azimuth times and de-skewing is on, once more de-skewed with the velocity that first
-    estimate gives.
-    """
+    """Pose of scan `cur` in the frame of scan `prev` (check `ok`). `twist` (3,) de-skews both;
+    without it they are registered as measured, then (with azimuth times and de-skew on) again
+    de-skewed at the velocity that estimate gives."""
     cfg = OdometryConfig() if cfg is None else cfg
-    ref_polar = preprocess_polar(prev, cfg.preprocess)
-    cur_polar = preprocess_polar(cur, cfg.preprocess)
+    ref_polar, cur_polar = (preprocess_polar(scan, cfg.preprocess) for scan in (prev, cur))
     use_twist = twist if cfg.deskew else None
     estimate = register(
         PreparedScan(ref_polar, use_twist, cfg), PreparedScan(cur_polar, use_twist, cfg), cfg

@@ -37,10 +37,10 @@ from typing import Any
 
 import numpy as np
 
-import odometry.deskew_choice as deskew_choice
 import odometry.odometry as odometry_module
 import odometry.registration as registration
-from odometry.rotation import ROTATION
+import odometry.velocity as velocity
+from odometry.phase_correlation import ROTATION
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.stride import strided
 from radar_slam.evaluation.metrics import evaluate
@@ -98,7 +98,7 @@ def _patched(module: object, name: str, replacement: object) -> Iterator[None]:
 
 
 def _no_redeskew() -> contextlib.AbstractContextManager[None]:
-    return _patched(deskew_choice, "redeskewed", lambda _r, _b, rendered, *_a, **_k: rendered)
+    return _patched(velocity, "redeskewed", lambda _r, rendered, *_a, **_k: rendered)
 
 
 def _no_deferred_first_images() -> contextlib.AbstractContextManager[None]:
@@ -106,7 +106,7 @@ def _no_deferred_first_images() -> contextlib.AbstractContextManager[None]:
 
 
 def _no_trend() -> contextlib.AbstractContextManager[None]:
-    return _patched(deskew_choice, "YAW_TREND_GAIN", 0.0)
+    return _patched(velocity, "YAW_TREND_GAIN", 0.0)
 
 
 def _keyframe_only() -> contextlib.AbstractContextManager[None]:

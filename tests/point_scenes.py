@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry.deskew import motion_from_twist
+from odometry.preprocess import motion_from_twist
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.mulran import column_azimuths_rad
 from radar_slam.datasets.sweep import uniform_azimuth_times_ns

@@ -20,7 +20,7 @@ from test_odometry_sim import (  # noqa: F401
 )
 
 from odometry import estimate_motion
-from odometry.deskew import motion_from_twist
+from odometry.preprocess import motion_from_twist
 from radar_slam.datasets import MulRanSequence, open_sequence
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.registry import DatasetConfig

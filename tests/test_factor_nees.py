@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry.scan import RadarFrame
+from odometry import RadarFrame
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.stride import strided

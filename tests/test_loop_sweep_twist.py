@@ -9,9 +9,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from odometry import OdometryResult
 from odometry.config import OdometryConfig
-from odometry.deskew import twist_from_motion
-from odometry.history import OdometryResult
+from odometry.preprocess import twist_from_motion
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.loops import KeyScan, LoopClosureConfig, LoopDetector, Verification
 from radar_slam.loops.sweep_twist import (

@@ -18,27 +18,23 @@ import pytest
 from test_odometry_units import FakeScan, clockwise_azimuths
 
 from odometry.config import OdometryConfig, PreprocessConfig
-from odometry.deskew import sampling_maps
 from odometry.phase_correlation import (
+    ROTATION,
     SPECTRUM_EPS,
+    _centred_log_magnitude,
+    _rotation_of_peak,
     correlate,
+    correlate_1d,
     forward,
     forward_rows,
     inverse,
     locate_peak,
     pack,
-)
-from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
-from odometry.registration import PreparedScan, _residual_rotation, coarse_level
-from odometry.rotation import (
-    ROTATION,
-    _centred_log_magnitude,
-    _rotation_of_peak,
-    angular_spectrum,
-    correlate_1d,
     polar_grid,
     refine_rotation_against,
 )
+from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian, sampling_maps
+from odometry.registration import PreparedScan, _residual_rotation, coarse_level
 from raplace.warp import wrap_rows
 
 N_AZ = 400
@@ -165,13 +161,13 @@ def test_prepared_scan_caches_equal_fresh_computations() -> None:
     coarse = render_cartesian(polar, coarse_level(cfg), 0.0, twist, scan.image_time_s)
     np.testing.assert_array_equal(scan.coarse_spectrum, forward(coarse))
     grid = polar_grid(ROTATION)
-    np.testing.assert_array_equal(scan.refine_spectrum, angular_spectrum(scan.refine_image))
+    np.testing.assert_array_equal(scan.refine_spectrum, forward_rows(scan.refine_image))
     # The cached reference spectrum gives the same residual rotation as the images.
     moving = PreparedScan(preprocess_polar(_blob_scan(3, 250_000_000), cfg.preprocess), twist, cfg)
-    cached = _residual_rotation(scan, moving, np.array([1.5, 0.2]), 0.05, cfg)
+    cached = _residual_rotation(scan, moving, np.array([1.5, 0.2]), 0.05)
     points = grid.shifted(1.5, 0.2)
     fresh = refine_rotation_against(
-        angular_spectrum(scan.refine_image), moving._sample(points, 0.05), ROTATION
+        forward_rows(scan.refine_image), moving._sample(points, 0.05), ROTATION
     )
     assert cached == fresh
 

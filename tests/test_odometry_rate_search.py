@@ -1,18 +1,17 @@
-"""The de-skew yaw-rate search by correlation peak quality (`odometry.deskew_choice`, used by loop
+"""The de-skew yaw-rate search by correlation peak quality (`odometry.velocity`, used by loop
 verification at low frame rates; `tests/test_loops.py` checks it on a loop query)."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 import pytest
 
-from odometry import OdometryConfig, deskew_choice
-from odometry.deskew_choice import MAX_VERTEX_STEPS, vertex_offset, weak_searched
+from odometry import OdometryConfig, velocity
 from odometry.preprocess import preprocess_polar
 from odometry.registration import MotionEstimate, PreparedScan, register_images
+from odometry.velocity import MAX_VERTEX_STEPS, vertex_offset, weak_searched
 from radar_slam.datasets import OxfordSequence
 
 
@@ -36,11 +35,9 @@ def test_only_a_collapsed_peak_has_its_yaw_rate_searched(oxford: OxfordSequence)
     what comes back correlates at least as strongly."""
     cfg = OdometryConfig()
     twist = np.array([8.0, 0.0, np.deg2rad(20.0)])
-    reference = SimpleNamespace(
-        scan=PreparedScan(preprocess_polar(oxford[0], cfg.preprocess), twist, cfg)
-    )
+    reference = PreparedScan(preprocess_polar(oxford[0], cfg.preprocess), twist, cfg)
     scan = PreparedScan(preprocess_polar(oxford[1], cfg.preprocess), twist, cfg)
-    estimate = register_images(reference.scan, scan, cfg)
+    estimate = register_images(reference, scan, cfg)
     assert estimate.ok, estimate.reason
     calls = []
 
@@ -48,11 +45,11 @@ def test_only_a_collapsed_peak_has_its_yaw_rate_searched(oxford: OxfordSequence)
         calls.append(1)
         return register_images(*args, **kwargs)
 
-    kept = weak_searched(reference, (scan, estimate), estimate.quality, cfg, counting)  # type: ignore[arg-type]
+    kept = weak_searched(reference, (scan, estimate), estimate.quality, cfg, counting)
     assert kept[1] is estimate and calls == []
-    limit = estimate.quality / deskew_choice.WEAK_PEAK_FRACTION
+    limit = estimate.quality / velocity.WEAK_PEAK_FRACTION
     searched_scan, searched = weak_searched(
         reference, (scan, estimate), 1.01 * limit, cfg, counting
-    )  # type: ignore[arg-type]
+    )
     assert len(calls) >= 2
     assert searched.ok and searched.quality >= estimate.quality

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -21,11 +20,8 @@ from numpy.typing import NDArray
 from test_odometry_sim import render
 
 from odometry import OdometryConfig, estimate_motion
-from odometry.deskew import motion_from_twist, twist_from_motion
-from odometry.deskew_choice import with_trend
-from odometry.history import ScanNode
-from odometry.odometry import Odometry
-from odometry.recovery import plausible_twist
+from odometry.odometry import Odometry, ScanNode
+from odometry.preprocess import motion_from_twist, twist_from_motion
 from odometry.registration import (
     MotionEstimate,
     PreparedScan,
@@ -33,7 +29,7 @@ from odometry.registration import (
     register,
     register_images,
 )
-from odometry.velocity import Velocity, bounded_twist
+from odometry.velocity import Velocity, bounded_twist, plausible_twist, with_trend
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.datasets.stride import strided
@@ -269,7 +265,7 @@ def test_the_last_registered_scan_stands_in_for_a_failed_keyframe(
             self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
         ) -> MotionEstimate:
             estimate = super()._registered(reference, scan, predicted)
-            if len(self.results) == failing and reference is self._state.keyframe:
+            if len(self.results) == failing and reference is self._keyframe:
                 return dataclasses.replace(estimate, ok=False, reason="forced")
             return estimate
 
@@ -377,15 +373,15 @@ def test_the_images_pick_the_yaw_rate_trend_where_it_matches_the_sweep(
     truth = motion_from_twist(during, 0.25)
     first = render(scene, tables, start, start_s, before, seed=1)
     second = render(scene, tables, se2.compose(start, truth), start_s + 0.25, during, seed=2)
-    reference = SimpleNamespace(scan=prepare(first, cfg, before))
+    reference = prepare(first, cfg, before)
     rising = np.deg2rad(during_dps - before_dps) / 2.0  # the last change, over 0.25 s
     velocity = Velocity(before, int(round((start_s - 0.125) * NS_PER_S)), rising, 0.25)
     constant = prepare(second, cfg, before)
-    estimate = register_images(reference.scan, constant, cfg)
-    kept, kept_estimate = with_trend(reference, constant, estimate, velocity, cfg)  # type: ignore[arg-type]
+    estimate = register_images(reference, constant, cfg)
+    kept, kept_estimate = with_trend(reference, constant, estimate, velocity, cfg)
     assert kept is not constant and kept.twist is not None and kept.twist[2] > before[2]
     assert kept_estimate.quality > estimate.quality
-    constant_error = errors(register(reference.scan, constant, cfg).motion, truth)
-    trend_error = errors(register(reference.scan, kept, cfg).motion, truth)
+    constant_error = errors(register(reference, constant, cfg).motion, truth)
+    trend_error = errors(register(reference, kept, cfg).motion, truth)
     assert trend_error[1] <= 0.6 * constant_error[1], (trend_error, constant_error)
     assert trend_error[0] <= constant_error[0], (trend_error, constant_error)

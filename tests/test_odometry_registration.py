@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from odometry.config import OdometryConfig
-from odometry.deskew import motion_from_twist
+from odometry.preprocess import motion_from_twist
 from odometry.registration import estimate_motion
 from radar_slam.datasets import OxfordSequence
 from radar_slam.datasets.frame import RadarFrame

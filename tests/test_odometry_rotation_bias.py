@@ -18,8 +18,8 @@ from point_scenes import point_scene, render_polar, scan_frame, static_poses
 
 from odometry import registration
 from odometry.config import OdometryConfig
+from odometry.phase_correlation import ROTATION
 from odometry.registration import estimate_motion
-from odometry.rotation import ROTATION
 
 SEEDS = range(5)
 MAX_MEAN_RELATIVE_ERROR = 0.005

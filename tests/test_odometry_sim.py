@@ -17,8 +17,8 @@ import pytest
 from numpy.typing import NDArray
 
 from odometry import OdometryConfig, estimate_motion
-from odometry.deskew import motion_from_twist, twist_from_motion
 from odometry.odometry import Odometry
+from odometry.preprocess import motion_from_twist, twist_from_motion
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.sim.family import open_synthetic
 from radar_slam.sim.generate import Scene, build_scene, generate_sequence, make_renderer

@@ -1,4 +1,4 @@
-"""A scan the motion model cannot describe stays a local error (`odometry.recovery`).
+"""A scan the motion model cannot describe stays a local error (`odometry.velocity`).
 
 On `long_city` the simulator turns each reversal of the route (a street driven there and back)
 into two heading snaps of 90 deg, each within one 0.25 s sweep, 0.75 s apart. Such a sweep is
@@ -17,7 +17,7 @@ from test_odometry_recovery import drive, errors, run, tiny_scene  # noqa: F401
 
 from odometry.config import OdometryConfig
 from odometry.odometry import Odometry
-from odometry.recovery import agrees, plausible_twist
+from odometry.velocity import agrees, plausible_twist
 from radar_slam.datasets.frame import RadarFrame
 from radar_slam.sim.generate import Scene
 from radar_slam.sim.render import RenderTables
@@ -69,7 +69,6 @@ def test_an_implausible_twist_is_not_a_velocity() -> None:
 
 
 def test_agreement_with_the_prediction() -> None:
-    config = OdometryConfig()
-    assert agrees(np.array([10.0, 1.0, 0.05]), np.array([9.0, 0.5, 0.0]), config)
-    assert not agrees(np.array([10.0, 1.0, 0.0]), np.array([8.0, 1.0, 0.0]), config)
-    assert agrees(np.array([0.0, 0.0, np.pi - 0.01]), np.array([0.0, 0.0, -np.pi]), config)
+    assert agrees(np.array([10.0, 1.0, 0.05]), np.array([9.0, 0.5, 0.0]))
+    assert not agrees(np.array([10.0, 1.0, 0.0]), np.array([8.0, 1.0, 0.0]))
+    assert agrees(np.array([0.0, 0.0, np.pi - 0.01]), np.array([0.0, 0.0, -np.pi]))

@@ -11,10 +11,16 @@ import pytest
 
 from odometry import OdometryError
 from odometry.config import OdometryConfig, PreprocessConfig
-from odometry.deskew import motion_from_twist, sampling_maps, twist_from_motion
 from odometry.phase_correlation import correlate, forward, locate_peak
-from odometry.preprocess import cartesian_level, preprocess_polar, render_cartesian
-from odometry.scan import Scan
+from odometry.preprocess import (
+    Scan,
+    cartesian_level,
+    motion_from_twist,
+    preprocess_polar,
+    render_cartesian,
+    sampling_maps,
+    twist_from_motion,
+)
 from raplace.se2 import compose
 from raplace.warp import CartesianGrid, CartesianWarper
 

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from odometry.scan import Scan
+from odometry import Scan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.errors import DatasetFormatError
 from radar_slam.loops import LoopClosureError, LoopConstraint, LoopDetector

@@ -6,7 +6,7 @@ matches (which grows with the segments' length). A loop is accepted once `min_su
 agree with it; until then it is pending; it is rejected when it contradicts every accepted loop
 nearby, or when the query has moved `WINDOW_M` on without support. Two loops judge each other
 only when no odometry step between their queries, nor between their matches, moved or turned
-faster than a vehicle can (`odometry.recovery.plausible_twist`; `VerifiedLoop.query_segment` /
+faster than a vehicle can (`odometry.plausible_twist`; `VerifiedLoop.query_segment` /
 `match_segment`): across such a step the odometry poses are not trusted, and a loop measured
 there can share their error (a scan swept while spinning), which the cycle would then confirm
 instead of catching.

@@ -15,7 +15,7 @@ step after it (`odometry.interpolated_twist`, held constant outside them):
   after (the backward step alone lags the sweep by 3/8 s);
 - scans stamped mid-sweep (Oxford): half-way, the central difference.
 
-A step whose twist is beyond the vehicle's limits (`odometry.recovery.plausible_twist`) is an
+A step whose twist is beyond the vehicle's limits (`odometry.plausible_twist`) is an
 odometry step not to be trusted; its twist is not used (the other side's is, alone).
 """
 

@@ -23,12 +23,6 @@ from radar_slam.commands.bag_options import (
 from radar_slam.commands.options import DATA_ROOT_OPTION
 from radar_slam.errors import ResultsError
 from radar_slam.pipeline import open_configured
-from radar_slam.rosbag_out import (
-    Storage,
-    check_bag_out,
-    write_sequence_bag,
-    write_trajectories_bag,
-)
 from radar_slam.trajectory import read_tum
 
 TRAJECTORY_FILES = ("odometry", "slam", "gt")
@@ -62,6 +56,13 @@ def export_command(
     data_root: Path | None = DATA_ROOT_OPTION,
 ) -> None:
     """Write a sequence (scans + ground truth) or a run's trajectories as a ROS 1/2 bag."""
+    from radar_slam.rosbag_out import (  # the bag writers only for this command
+        Storage,
+        check_bag_out,
+        write_sequence_bag,
+        write_trajectories_bag,
+    )
+
     if storage not in ("mcap", "sqlite3"):
         raise ResultsError(f"--storage {storage!r}: choose mcap or sqlite3")
     chosen: Storage = "mcap" if storage == "mcap" else "sqlite3"

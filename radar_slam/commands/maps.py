@@ -20,10 +20,7 @@ from radar_slam.commands.options import (
     OUT_OPTION,
 )
 from radar_slam.config import write_yaml
-from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import Map
-from radar_slam.maps.localizer import Localization, Localizer
-from radar_slam.maps.writers import localization_summary, map_info, write_localization
 from radar_slam.outputs import json_text
 from radar_slam.pipeline import frame_count, ground_truth_of, open_configured, sequence_label
 from radar_slam.results import check_output_root, check_result_location, write_result_dir
@@ -44,6 +41,11 @@ def localize_command(
 ) -> None:
     """Localise every scan of SEQ in MAP: global relocalisation, then tracking; writes
     localization.tum/.csv, a plot and, with ground truth, metrics.json."""
+    # The localiser's modules load only for this command (not for every `radar-slam` call).
+    from radar_slam.maps.evaluate import evaluate_localization
+    from radar_slam.maps.localizer import Localization, Localizer
+    from radar_slam.maps.writers import localization_summary, write_localization
+
     check_output_root(out)
     the_map = Map.load(map_path)
     seq, settings = open_configured(sequence, data_root, config)
@@ -75,6 +77,8 @@ def info_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of text."),
 ) -> None:
     """Print a map's sessions, keyframes, extent, size and GT alignment."""
+    from radar_slam.maps.writers import map_info
+
     info = map_info(map_path, Map.load(map_path))
     if as_json:
         typer.echo(json_text(info), nl=False)

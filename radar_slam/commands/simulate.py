@@ -9,7 +9,6 @@ from tqdm import tqdm
 
 from radar_slam.errors import ResultsError
 from radar_slam.results import check_writable
-from radar_slam.sim.generate import build_scene, checked_frame_count, generate_sequence
 from radar_slam.sim.scenarios import GROUPS, SCENARIOS, expand
 from radar_slam.sim.writer import FIGURE_FILE, remove_simulated, simulator_files
 
@@ -61,6 +60,9 @@ def simulate_command(
     ),
 ) -> None:
     """Simulate a scenario and write it in the MulRan layout (polar PNGs, global_pose.csv)."""
+    # The generator loads only for this command (not for every `radar-slam` call).
+    from radar_slam.sim.generate import build_scene, checked_frame_count, generate_sequence
+
     members = expand(scenario)
     grouped = len(members) > 1
     scenes = [build_scene(member, seed) for member in members]  # frame counts checked first

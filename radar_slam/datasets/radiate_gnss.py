@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pyproj import Transformer
 
 from radar_slam.datasets._io import check_strictly_increasing
 from radar_slam.datasets.mulran import interpolate_poses
@@ -255,6 +254,8 @@ def read_gnss_track(folder: Path) -> GnssTrack:
         raise DatasetFormatError(f"{times_path}: fewer than two distinct GNSS fixes")
     check_strictly_increasing(times, times_path, "time of a new fix")
     epsg = utm_epsg(float(kept[0, 0]), float(kept[0, 1]))
+    from pyproj import Transformer  # PROJ loads only for a RADIATE drive's GNSS
+
     transformer = Transformer.from_crs(WGS84, f"EPSG:{epsg}", always_xy=True)
     easting, northing = transformer.transform(kept[:, 1], kept[:, 0])
     poses = np.stack([easting, northing, yaw_enu(kept[:, 2:6])], axis=-1)

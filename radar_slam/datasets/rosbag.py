@@ -30,13 +30,10 @@ import logging
 from dataclasses import dataclass, replace
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.interfaces import Connection
-from rosbags.typesys import Stores, get_typestore
 
 from radar_slam.datasets._io import decode_oxford_form, frame_index
 from radar_slam.datasets.frame import GroundTruthSource, RadarFrame
@@ -55,6 +52,10 @@ from radar_slam.datasets.sweep import SweepTimes
 from radar_slam.errors import ConfigError, DatasetFormatError, DatasetNotFoundError
 from radar_slam.trajectory import yaw_from_quaternion
 from raplace import NS_PER_S, checks
+
+if TYPE_CHECKING:  # rosbags loads when a bag is opened, not with every loader
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
 
 logger = logging.getLogger(__name__)
 
@@ -237,6 +238,9 @@ class BagSequence:
 
     # -- opening ------------------------------------------------------------------------------
     def _open(self) -> AnyReader:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.typesys import Stores, get_typestore
+
         reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         try:
             reader.open()

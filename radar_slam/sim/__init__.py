@@ -22,8 +22,22 @@ Entry points: `generate.generate_sequence(scenario, folder)`, the `synthetic` da
 (`radar_slam.sim.family`) and `radar-slam simulate`.
 """
 
-from radar_slam.sim.generate import GeneratedSequence, Scene, build_scene, generate_sequence
-from radar_slam.sim.scenarios import SCENARIOS, Scenario, get_scenario
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+_EXPORTS = {
+    "SCENARIOS": "radar_slam.sim.scenarios",
+    "GeneratedSequence": "radar_slam.sim.generate",
+    "Scenario": "radar_slam.sim.scenarios",
+    "Scene": "radar_slam.sim.generate",
+    "build_scene": "radar_slam.sim.generate",
+    "generate_sequence": "radar_slam.sim.generate",
+    "get_scenario": "radar_slam.sim.scenarios",
+}
+"""Public name -> its module, loaded on first use (the `synthetic` family opens a sequence
+already generated without loading the generator)."""
 
 __all__ = [
     "SCENARIOS",
@@ -34,3 +48,18 @@ __all__ = [
     "generate_sequence",
     "get_scenario",
 ]
+
+if TYPE_CHECKING:
+    from radar_slam.sim.generate import GeneratedSequence, Scene, build_scene, generate_sequence
+    from radar_slam.sim.scenarios import SCENARIOS, Scenario, get_scenario
+
+
+def __getattr__(name: str) -> object:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -27,8 +27,7 @@ from radar_slam.datasets.open import closest
 from radar_slam.datasets.registry import Family, family_folder, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
 from radar_slam.results import check_writable, pid_alive
-from radar_slam.sim.generate import generate_sequence, simulator_version
-from radar_slam.sim.scenarios import SCENARIOS
+from radar_slam.sim.scenarios import SCENARIOS, simulator_version
 from radar_slam.sim.writer import (
     COMPLETE_MARKER,
     WORLD_FILE,
@@ -112,6 +111,8 @@ def resolve_synthetic(root: Path, name: str) -> Path:
     _remove_stale_partials(base, name)
     partial = base / f".{name}{PARTIAL_SUFFIX}{os.getpid()}"
     logger.warning("generating synthetic/%s into %s (first use)", name, folder)
+    from radar_slam.sim.generate import generate_sequence  # the generator only when it runs
+
     try:
         generate_sequence(SCENARIOS[name], partial)
         if is_complete(folder, name):  # another process finished first

@@ -22,7 +22,7 @@ from radar_slam.sim.render import Renderer
 from radar_slam.sim.reversal import drive_route
 from radar_slam.sim.route import Trajectory, route_edges
 from radar_slam.sim.scatterers import World
-from radar_slam.sim.scenarios import Scenario
+from radar_slam.sim.scenarios import Scenario, simulator_version
 from radar_slam.sim.town import Town
 from radar_slam.sim.townplan import generate_town, street_plan
 from radar_slam.sim.world import build_world
@@ -38,12 +38,6 @@ from raplace import NS_PER_S
 
 logger = logging.getLogger(__name__)
 
-SIM_VERSION = "1.2"
-"""Bump when the output for a given scenario and seed changes (regenerates cached sequences).
-1.2: `reverse` became a figure-eight driven both ways (the other scenarios are unchanged)."""
-SCENARIO_VERSIONS: dict[str, str] = {"long_city": "1.3"}
-"""Scenarios whose output changed without the others' changing: only they are regenerated.
-1.3: `long_city` turns round at its route reversals (three-point turns, reversal.py)."""
 GT_PERIOD_NS = 10_000_000
 """global_pose.csv is sampled at 100 Hz, plus a row at every scan time [ns]."""
 ROUTE_STREAM, FRAME_STREAM = 2, 3
@@ -89,11 +83,6 @@ class Scene:
         poses = self.trajectory.base_poses(offsets_ns.astype(np.float64) / NS_PER_S)
         poses[:, :2] += self.scenario.origin_xy
         return poses
-
-
-def simulator_version(scenario: str) -> str:
-    """Version of the simulator output of scenario `scenario` (written into its markers)."""
-    return SCENARIO_VERSIONS.get(scenario, SIM_VERSION)
 
 
 def frame_rng(scene: Scene, index: int) -> np.random.Generator:

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import gaussian_filter1d
 
 from radar_slam.datasets.navtech import MULRAN_T_BASE_RADAR
 from radar_slam.errors import RadarSlamError
@@ -167,6 +166,8 @@ def _speed_profile(
 def smoothed_centre_line(centre: FloatArray, cfg: DrivingConfig) -> FloatArray:
     """The route's centre line (K, 2) [m], sampled every PATH_STEP_M, smoothed along its
     length by a Gaussian of `cfg.smoothing_m` (corners become turns); same K samples."""
+    from scipy.ndimage import gaussian_filter1d  # SciPy's ndimage only when a route is made
+
     sigma = cfg.smoothing_m / PATH_STEP_M
     return np.stack(
         [

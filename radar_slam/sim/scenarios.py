@@ -42,6 +42,13 @@ from raplace import NS_PER_S
 
 Waypoints = tuple[tuple[int, int], ...]
 
+SIM_VERSION = "1.2"
+"""Bump when the output for a given scenario and seed changes (regenerates cached sequences).
+1.2: `reverse` became a figure-eight driven both ways (the other scenarios are unchanged)."""
+SCENARIO_VERSIONS: dict[str, str] = {"long_city": "1.3"}
+"""Scenarios whose output changed without the others' changing: only they are regenerated.
+1.3: `long_city` turns round at its route reversals (three-point turns, reversal.py)."""
+
 EPOCH_NS = 1_567_000_000_000_000_000
 """Start of the default scenarios' clocks (late August 2019, like MulRan) [ns]."""
 DAY_NS = 86_400 * NS_PER_S
@@ -651,6 +658,11 @@ GROUPS: dict[str, tuple[str, ...]] = {
 """Names that stand for several sequences generated together."""
 
 DEFAULT_SCENARIO = "loop"
+
+
+def simulator_version(scenario: str) -> str:
+    """Version of the simulator output of scenario `scenario` (written into its markers)."""
+    return SCENARIO_VERSIONS.get(scenario, SIM_VERSION)
 
 
 def get_scenario(name: str) -> Scenario:

@@ -46,7 +46,13 @@ from numpy.typing import ArrayLike, NDArray
 from odometry import OdometryError
 from odometry import velocity as motion_model
 from odometry.config import OdometryConfig
-from odometry.preprocess import Scan, motion_from_twist, preprocess_polar, twist_from_motion
+from odometry.preprocess import (
+    PolarScan,
+    Scan,
+    motion_from_twist,
+    preprocess_polar,
+    twist_from_motion,
+)
 from odometry.registration import MotionEstimate, PreparedScan, register_images
 from odometry.velocity import (
     Velocity,
@@ -184,12 +190,14 @@ class Odometry:
         """The last registered scan's conditioned form and spectra (shared: read-only) or None."""
         return None if self._previous is None else self._previous.scan
 
-    def register(self, frame: Scan) -> OdometryResult:
+    def register(self, frame: Scan, polar: PolarScan | None = None) -> OdometryResult:
         """Register the next scan; returns its result (`motion` from the previous scan's pose).
+        `polar`: its conditioned form, `preprocess_polar(frame, config.preprocess)`, when the
+        caller made it already (e.g. on a reader thread).
         Raises `OdometryError` when the scan is malformed or not later than the previous one."""
         self._registrations = 0
         index = len(self._history)
-        scan = self._prepare(frame)
+        scan = self._prepare(frame, polar)
         previous, keyframe = self._previous, self._keyframe
         if keyframe is None or previous is None:
             return self._start(index, scan)
@@ -214,10 +222,12 @@ class Odometry:
         last = self._last_registered
         return None if last is self._keyframe else last
 
-    def _prepare(self, frame: Scan) -> PreparedScan:
-        """Condition a scan and render it, de-skewed at the running velocity without its trend."""
+    def _prepare(self, frame: Scan, polar: PolarScan | None) -> PreparedScan:
+        """Condition a scan (unless `polar` is its conditioned form) and render it, de-skewed at
+        the running velocity without its trend."""
         cfg = self.config
-        polar = preprocess_polar(frame, cfg.preprocess)
+        if polar is None:
+            polar = preprocess_polar(frame, cfg.preprocess)
         twist = None
         if self._velocity is not None and cfg.deskew:
             mid_ns = polar.timestamp_ns + int(round((polar.mid_sweep_s or 0.0) * NS_PER_S))

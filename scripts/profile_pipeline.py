@@ -4,8 +4,9 @@ Runs `radar_slam.pipeline.Pipeline` on a sequence under cProfile, all in the mai
 reader or loop thread: cProfile sees one thread; the results are the same), and splits the run by
 stage from the cumulative times of the pipeline's own step methods (one home for each stage):
 
-    read/decode       Pipeline._read (the loader: PNG decode, polar array)
-    odometry          Pipeline._track (Odometry.register)
+    read/decode       Pipeline._read (the loader: PNG decode, polar array; the scan conditioned
+                      for the odometry, `preprocess_polar`)
+    odometry          Pipeline._track (Odometry.register of the conditioned scan)
     loop detection    the loop runner's _step + finish, minus verification
       of which query  PlaceRecognizer.query (RaPlace retrieval over the database)
       of which descr. the RaPlace descriptor of each database scan

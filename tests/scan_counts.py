@@ -23,6 +23,7 @@ CONDITIONING_SITES = (
     "odometry.registration",
     "radar_slam.maps.images",
     "radar_slam.maps.keyframes",
+    "radar_slam.pipeline.slam",
 )
 """The modules that call the odometry's conditioning (`preprocess_polar`) on a scan."""
 

@@ -2,9 +2,10 @@
 
 Both keep the results independent of timing:
 
-- `ScanReader` reads the next scans of a sequence on a thread (PNG decoding releases the GIL)
-  into a bounded queue; `next()` hands them out in order and raises a reading error in the
-  caller's thread at the scan where it happened.
+- `ScanReader` reads the next scans of a sequence on a thread (PNG decoding releases the GIL;
+  the SLAM run also conditions each scan there for the odometry) into a bounded queue; `next()`
+  hands them out in order and raises a reading error in the caller's thread at the scan where it
+  happened.
 - `LoopRunner` feeds (scan, odometry pose, key) to a loop detector and hands out the loops found
   for scan k when the caller reaches scan k + `lag` (waiting for the detector when it is late).
   `InlineLoopRunner` runs the detector in the caller's thread, `ThreadedLoopRunner` on a worker
@@ -69,20 +70,21 @@ def _put(q: queue.Queue[T], item: T, stop: threading.Event) -> bool:
     return False
 
 
-class ScanReader:
-    """Scans 0..frames-1 read ahead on a thread, at most `depth` of them waiting.
+class ScanReader(Generic[T]):
+    """Scans 0..frames-1 (what `read` returns for each) read ahead on a thread, at most `depth`
+    of them waiting.
 
     Use as a context manager (the thread stops on exit, also on an error or Ctrl-C); `depth` 0
     reads in the caller's thread instead.
     """
 
-    def __init__(self, read: Callable[[int], RadarFrame], frames: int, depth: int) -> None:
+    def __init__(self, read: Callable[[int], T], frames: int, depth: int) -> None:
         self.read = read
         self.frames = frames
         self.depth = depth
         self._next = 0
         self._stop = threading.Event()
-        self._queue: queue.Queue[_Outcome[RadarFrame]] = queue.Queue(maxsize=max(depth, 1))
+        self._queue: queue.Queue[_Outcome[T]] = queue.Queue(maxsize=max(depth, 1))
         self._thread: threading.Thread | None = None
         if depth > 0 and frames > 0:
             self._thread = threading.Thread(target=self._work, name="scan-reader", daemon=True)
@@ -91,13 +93,13 @@ class ScanReader:
     def _work(self) -> None:
         for index in range(self.frames):
             try:
-                outcome: _Outcome[RadarFrame] = _Outcome(self.read(index))
+                outcome: _Outcome[T] = _Outcome(self.read(index))
             except BaseException as exc:  # handed to the caller at this scan
                 outcome = _Outcome(error=exc)
             if not _put(self._queue, outcome, self._stop) or outcome.error is not None:
                 return
 
-    def next(self) -> RadarFrame:
+    def next(self) -> T:
         """The next scan (in order); raises the reading error of that scan."""
         index = self._next
         if index >= self.frames:
@@ -114,7 +116,7 @@ class ScanReader:
             self._thread.join()
             self._thread = None
 
-    def __enter__(self) -> ScanReader:
+    def __enter__(self) -> ScanReader[T]:
         return self
 
     def __exit__(self, *exc: object) -> None:

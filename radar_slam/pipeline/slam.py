@@ -38,7 +38,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from odometry import Odometry, OdometryResult, PreparedScan, Scan
+from odometry import (
+    Odometry,
+    OdometryResult,
+    PolarScan,
+    PreparedScan,
+    Scan,
+    preprocess_polar,
+)
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.errors import RadarSlamError
 from radar_slam.evaluation.truth import is_true_loop
@@ -186,13 +193,13 @@ class Pipeline:
         """
         self._start = time.perf_counter()
         reader = ScanReader(
-            self.sequence.__getitem__, self.frames, self.config.concurrency.read_ahead_scans
+            self._read_conditioned, self.frames, self.config.concurrency.read_ahead_scans
         )
         try:
             held: tuple[RadarFrame, PreparedScan | None] | None = None
             for index in range(self.frames):
-                frame = self._read(reader)
-                result = self._track(frame)
+                frame, polar = self._read(reader)
+                result = self._track(frame, polar)
                 if held is not None:
                     self._extend_graph(self.odometry.result(index - 1))
                     self._submit(*held, index - 1)
@@ -237,13 +244,22 @@ class Pipeline:
         )
 
     # -- per-scan steps -----------------------------------------------------------------------
-    def _read(self, reader: ScanReader) -> RadarFrame:
+    def _read_conditioned(self, index: int) -> tuple[RadarFrame, PolarScan]:
+        """Scan `index` and its conditioned form for the odometry, made where the scan is read:
+        on the reader thread when scans are read ahead (conditioning, like decoding, runs
+        mostly outside the GIL), which takes it off the odometry's thread."""
+        frame = self.sequence[index]
+        return frame, preprocess_polar(frame, self.config.odometry.preprocess)
+
+    def _read(
+        self, reader: ScanReader[tuple[RadarFrame, PolarScan]]
+    ) -> tuple[RadarFrame, PolarScan]:
         with self.timer("read"):
             return reader.next()
 
-    def _track(self, frame: RadarFrame) -> OdometryResult:
+    def _track(self, frame: RadarFrame, polar: PolarScan) -> OdometryResult:
         with self.timer("odometry"):
-            return self.odometry.register(frame)
+            return self.odometry.register(frame, polar)
 
     def _submit(self, frame: RadarFrame, prepared: PreparedScan | None, index: int) -> None:
         """Hand scan `index` to the loop detector with its odometry result (one scan after it

@@ -70,22 +70,20 @@ logger = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 GAP_SIGMA_XY_M = 1.0
-"""Standard deviation [m] of a prediction that covers a failed registration (a few m/s^2 of
-braking or acceleration over a 4 Hz interval, with margin)."""
+"""Standard deviation [m] of a prediction covering a failed registration (braking, with margin)."""
 GAP_SIGMA_YAW_DEG = 5.0
 """The same for its rotation [deg] (a steering change over the interval)."""
 KEYFRAME_QUALITY_FACTOR = 2.0
 """A peak below this multiple of `quality.min_peak_quality` makes a keyframe (overlap fading)."""
 UNAMBIGUOUS_QUALITY_FACTOR = 5.0
-"""A global registration whose peak is at least this multiple of `quality.min_peak_quality` is
-kept without a seeded one even off the prediction: the seeded search found the same motion there
-(docs/decisions.md)."""
+"""A global registration peaking at this multiple of `quality.min_peak_quality` needs no seeded
+one even off the prediction: the seeded search finds the same motion (docs/decisions.md)."""
 VELOCITY_LAG_FRACTION = 0.25
 """The error of the velocity that moves a pose to its reference time: this fraction of its last
 change, per axis (it lags an accelerating or turning vehicle)."""
 DESKEW_ERROR_FRACTION = 1.25
-"""A lagging de-skew velocity bends a scan by about its last change times half a sweep; this
-multiple of the bend is the translation standard deviation (the change itself lags)."""
+"""This multiple of a scan's bend by its lagging de-skew velocity (last change x half a sweep) is
+the translation standard deviation."""
 
 
 @dataclass(frozen=True)
@@ -97,8 +95,7 @@ class OdometryResult:
     timestamp_ns: int  # the scan's reference time [ns] (the time `pose` refers to)
     pose: FloatArray  # T_world_radar at `timestamp_ns`
     motion: FloatArray  # this scan's pose in the previous scan's frame (zeros for the first)
-    # (3, 3) covariance [m^2, m rad, rad^2] (x, y, yaw) of `keyframe_motion`, in the previous
-    # scan's axes (so that it also serves, conservatively, for `motion`).
+    # (3, 3) covariance [m^2, m rad, rad^2] of `keyframe_motion` in the previous scan's axes.
     covariance: FloatArray
     # The scan it was registered against: the keyframe, or the last registered scan when the
     # keyframe failed (itself for the first scan; the keyframe for a gap).
@@ -114,9 +111,8 @@ class OdometryResult:
 
 @dataclass
 class ScanNode:
-    """A scan: its pose at its reference time and the pose of its image frame (`image_pose`,
-    world), which the registrations chain (a gap's are the prediction); `conversion_covariance`
-    (own axes) is what moving the image pose to the reference time adds to `pose`."""
+    """A scan: its pose at its reference time and its image frame's (`image_pose`, world, which
+    registrations chain); `conversion_covariance` (own axes): what that move adds to `pose`."""
 
     index: int
     pose: FloatArray
@@ -191,10 +187,9 @@ class Odometry:
         return None if self._previous is None else self._previous.scan
 
     def register(self, frame: Scan, polar: PolarScan | None = None) -> OdometryResult:
-        """Register the next scan; returns its result (`motion` from the previous scan's pose).
-        `polar`: its conditioned form, `preprocess_polar(frame, config.preprocess)`, when the
-        caller made it already (e.g. on a reader thread).
-        Raises `OdometryError` when the scan is malformed or not later than the previous one."""
+        """Register the next scan (`polar`: its `preprocess_polar` form, when the caller made it);
+        returns its result (`motion` from the previous scan's pose). Raises `OdometryError` when
+        the scan is malformed or not later than the previous one."""
         self._registrations = 0
         index = len(self._history)
         scan = self._prepare(frame, polar)
@@ -223,11 +218,9 @@ class Odometry:
         return None if last is self._keyframe else last
 
     def _prepare(self, frame: Scan, polar: PolarScan | None) -> PreparedScan:
-        """Condition a scan (unless `polar` is its conditioned form) and render it, de-skewed at
-        the running velocity without its trend."""
+        """Condition a scan (unless given) and render it, de-skewed at the running velocity."""
         cfg = self.config
-        if polar is None:
-            polar = preprocess_polar(frame, cfg.preprocess)
+        polar = preprocess_polar(frame, cfg.preprocess) if polar is None else polar
         twist = None
         if self._velocity is not None and cfg.deskew:
             mid_ns = polar.timestamp_ns + int(round((polar.mid_sweep_s or 0.0) * NS_PER_S))

@@ -82,11 +82,8 @@ class Velocity:
 
 def plausible_twist(twist: FloatArray, cfg: OdometryConfig) -> bool:
     """`twist` (vx, vy [m/s], yaw rate [rad/s]) is within the vehicle's speed and yaw rate."""
-    qcfg = cfg.quality
-    return not (
-        np.hypot(twist[0], twist[1]) > qcfg.max_speed_mps
-        or np.rad2deg(abs(twist[2])) > qcfg.max_yaw_rate_dps
-    )
+    fast = np.hypot(twist[0], twist[1]) > cfg.quality.max_speed_mps
+    return not (fast or np.rad2deg(abs(twist[2])) > cfg.quality.max_yaw_rate_dps)
 
 
 def bounded_twist(twist: FloatArray, cfg: OdometryConfig) -> FloatArray:
@@ -103,18 +100,15 @@ def bounded_twist(twist: FloatArray, cfg: OdometryConfig) -> FloatArray:
 
 def close_twists(a: FloatArray, b: FloatArray, speed_mps: float, yaw_rate_radps: float) -> bool:
     """Two twists differ by at most `speed_mps` and `yaw_rate_radps`."""
-    return bool(
-        np.hypot(a[0] - b[0], a[1] - b[1]) <= speed_mps and abs(a[2] - b[2]) <= yaw_rate_radps
-    )
+    near = np.hypot(a[0] - b[0], a[1] - b[1]) <= speed_mps
+    return bool(near and abs(a[2] - b[2]) <= yaw_rate_radps)
 
 
 def agrees(motion: FloatArray, expected: FloatArray) -> bool:
     """`motion` (3,) is within the prediction tolerances of `expected` (3,), in one frame."""
     off = np.asarray(motion, dtype=np.float64) - np.asarray(expected, dtype=np.float64)
-    return bool(
-        np.hypot(off[0], off[1]) <= PREDICTION_TOLERANCE_M
-        and abs(wrap_angle(float(off[2]))) <= np.deg2rad(PREDICTION_TOLERANCE_DEG)
-    )
+    near = np.hypot(off[0], off[1]) <= PREDICTION_TOLERANCE_M
+    return bool(near and abs(wrap_angle(float(off[2]))) <= np.deg2rad(PREDICTION_TOLERANCE_DEG))
 
 
 def pose_at_reference(image_pose: FloatArray, twist: FloatArray, image_time_s: float) -> FloatArray:
@@ -207,9 +201,8 @@ def refreshed(scan: PreparedScan, velocity: Velocity, cfg: OdometryConfig) -> Pr
     if not cfg.deskew or scan.polar.timing is None:
         return scan
     new = expected_twist(velocity, image_time_ns(scan), cfg)
-    if scan.twist is not None and close_twists(
-        new, scan.twist, TWIST_REFRESH_MPS, TWIST_REFRESH_RADPS
-    ):
+    old = scan.twist
+    if old is not None and close_twists(new, old, TWIST_REFRESH_MPS, TWIST_REFRESH_RADPS):
         return scan
     return PreparedScan(scan.polar, new, cfg)
 

@@ -43,7 +43,10 @@ a yaw rate interpolated across a second of a junction turn)."""
 MIN_GAIN = 0.05
 """A searched de-skew is kept only when its peak is stronger by more than this fraction."""
 LOW_RATE_INTERVAL_S = 0.75
-"""Loop queries are searched when their twist is interpolated over at least this long [s]."""
+"""Loop queries are searched, and a yaw rate crossing zero not extrapolated, over this long [s]."""
+YAW_RATE_NOISE_RADPS = np.deg2rad(2.5)
+"""A 1 Hz yaw rate [rad/s] at most this large is a straight road's (above what the real drive
+measures on its straight stretches): going from it to a turn is a turn starting, not a crossing."""
 MAX_VERTEX_STEPS = 3.0
 """The parabola's vertex is tried at most this many half-widths from the kept yaw rate ..."""
 MIN_VERTEX_OFFSET = 0.25
@@ -62,14 +65,18 @@ class Velocity:
 
     def at(self, time_ns: int, trend_gain: float) -> FloatArray:
         """The twist at `time_ns` plus `trend_gain` times the yaw-rate trend extrapolated
-        linearly, by at most the last measured change and never across zero yaw rate."""
+        linearly, by at most the last change, never across zero; none over a low-rate interval
+        across which it crossed zero from beyond `YAW_RATE_NOISE_RADPS` (zero if it fell)."""
         twist = self.twist.copy()
         if trend_gain == 0.0 or self.span_s <= 0.0:
             return twist
         elapsed_s = (time_ns - self.time_ns) / NS_PER_S
         limit = abs(self.yaw_rate_change)
         delta = float(np.clip(self.yaw_rate_change / self.span_s * elapsed_s, -limit, limit))
-        yaw_rate = twist[2] + trend_gain * delta
+        yaw_rate, previous = twist[2] + trend_gain * delta, twist[2] - self.yaw_rate_change
+        crossed = twist[2] * previous < 0.0 and abs(previous) > YAW_RATE_NOISE_RADPS
+        if self.span_s >= LOW_RATE_INTERVAL_S and crossed:  # held: a swing; zero: a turn ended
+            yaw_rate = twist[2] * float(abs(twist[2]) >= abs(previous))
         twist[2] = yaw_rate if yaw_rate * twist[2] > 0.0 else 0.0
         return twist
 

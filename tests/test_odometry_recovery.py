@@ -301,6 +301,32 @@ def test_the_motion_model_is_bounded() -> None:
     assert wild[2] == pytest.approx(np.deg2rad(cfg.quality.max_yaw_rate_dps))
 
 
+def test_a_turn_ending_just_past_zero_yaw_rate_is_not_extrapolated_into_a_reversal() -> None:
+    """At 1 Hz a turn ends within one interval: 0.45 rad/s, then -0.005 rad/s (noise around
+    zero). The trend must not carry that change on to a turn the other way; a yaw rate that
+    grows past zero (a swing to the other side) is held as measured; a turn starting from a
+    straight road's noise around zero (-0.02 rad/s), or a yaw rate measured over a 4 Hz interval
+    (too short for a whole turn exit), keeps its trend."""
+    ended = Velocity(twist=np.array([8.0, 0.0, 0.45]), time_ns=0).updated(
+        np.array([8.0, 0.0, -0.005]), 1_000_000_000
+    )
+    for later_s in (0.125, 0.5, 1.0):
+        later = ended.at(1_000_000_000 + int(later_s * 1e9), trend_gain=1.0)
+        assert later[2] == 0.0
+    swinging = Velocity(twist=np.array([8.0, 0.0, 0.1]), time_ns=0).updated(
+        np.array([8.0, 0.0, -0.3]), 1_000_000_000
+    )
+    assert swinging.at(1_500_000_000, trend_gain=1.0)[2] == pytest.approx(-0.3)
+    starting = Velocity(twist=np.array([8.0, 0.0, -0.02]), time_ns=0).updated(
+        np.array([8.0, 0.0, 0.3]), 1_000_000_000
+    )
+    assert starting.at(1_500_000_000, trend_gain=1.0)[2] == pytest.approx(0.46)  # + 0.32 / 2
+    quick = Velocity(twist=np.array([8.0, 0.0, 0.45]), time_ns=0).updated(
+        np.array([8.0, 0.0, -0.005]), 250_000_000
+    )
+    assert quick.at(250_000_000 + 125_000_000, trend_gain=1.0)[2] == pytest.approx(-0.2325)
+
+
 def test_a_three_point_turn_at_one_hertz(tiny_scene: tuple[Scene, RenderTables]) -> None:
     """Forward at full lock (radius 5.5 m, 31 deg per scan), reverse gear on the other lock (the
     heading keeps turning while the car backs), forward again, one scan a second: 250 deg in

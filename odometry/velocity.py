@@ -66,7 +66,7 @@ class Velocity:
     def at(self, time_ns: int, trend_gain: float) -> FloatArray:
         """The twist at `time_ns` plus `trend_gain` times the yaw-rate trend extrapolated
         linearly, by at most the last change, never across zero; none over a low-rate interval
-        across which it crossed zero from beyond `YAW_RATE_NOISE_RADPS` (zero if it fell)."""
+        across which it crossed zero (zero if it fell in size), but out of noise into a turn."""
         twist = self.twist.copy()
         if trend_gain == 0.0 or self.span_s <= 0.0:
             return twist
@@ -74,9 +74,9 @@ class Velocity:
         limit = abs(self.yaw_rate_change)
         delta = float(np.clip(self.yaw_rate_change / self.span_s * elapsed_s, -limit, limit))
         yaw_rate, previous = twist[2] + trend_gain * delta, twist[2] - self.yaw_rate_change
-        crossed = twist[2] * previous < 0.0 and abs(previous) > YAW_RATE_NOISE_RADPS
-        if self.span_s >= LOW_RATE_INTERVAL_S and crossed:  # held: a swing; zero: a turn ended
-            yaw_rate = twist[2] * float(abs(twist[2]) >= abs(previous))
+        starting = abs(previous) <= YAW_RATE_NOISE_RADPS < abs(twist[2])  # a turn, from noise
+        if self.span_s >= LOW_RATE_INTERVAL_S and twist[2] * previous < 0.0 and not starting:
+            yaw_rate = twist[2] * float(abs(twist[2]) >= abs(previous))  # a swing; a turn ended
         twist[2] = yaw_rate if yaw_rate * twist[2] > 0.0 else 0.0
         return twist
 

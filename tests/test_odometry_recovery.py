@@ -304,9 +304,10 @@ def test_the_motion_model_is_bounded() -> None:
 def test_a_turn_ending_just_past_zero_yaw_rate_is_not_extrapolated_into_a_reversal() -> None:
     """At 1 Hz a turn ends within one interval: 0.45 rad/s, then -0.005 rad/s (noise around
     zero). The trend must not carry that change on to a turn the other way; a yaw rate that
-    grows past zero (a swing to the other side) is held as measured; a turn starting from a
-    straight road's noise around zero (-0.02 rad/s), or a yaw rate measured over a 4 Hz interval
-    (too short for a whole turn exit), keeps its trend."""
+    grows past zero (a swing to the other side) is held as measured, one that stays within a
+    straight road's noise around zero is not extrapolated either; a turn starting from that noise
+    (-0.02 rad/s), or a yaw rate measured over a 4 Hz interval (too short for a whole turn exit),
+    keeps its trend."""
     ended = Velocity(twist=np.array([8.0, 0.0, 0.45]), time_ns=0).updated(
         np.array([8.0, 0.0, -0.005]), 1_000_000_000
     )
@@ -321,6 +322,10 @@ def test_a_turn_ending_just_past_zero_yaw_rate_is_not_extrapolated_into_a_revers
         np.array([8.0, 0.0, 0.3]), 1_000_000_000
     )
     assert starting.at(1_500_000_000, trend_gain=1.0)[2] == pytest.approx(0.46)  # + 0.32 / 2
+    wobbling = Velocity(twist=np.array([8.0, 0.0, 0.02]), time_ns=0).updated(
+        np.array([8.0, 0.0, -0.01]), 1_000_000_000
+    )
+    assert wobbling.at(1_500_000_000, trend_gain=1.0)[2] == 0.0  # noise across zero: no turn
     quick = Velocity(twist=np.array([8.0, 0.0, 0.45]), time_ns=0).updated(
         np.array([8.0, 0.0, -0.005]), 250_000_000
     )

@@ -13,9 +13,10 @@ The public API, importable from here (each name loads only its own module, so
 
 from __future__ import annotations
 
-import importlib
 import logging
 from typing import TYPE_CHECKING
+
+from radar_slam.lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -70,12 +71,4 @@ if TYPE_CHECKING:
     from radar_slam.trajectory import Trajectory
 
 
-def __getattr__(name: str) -> object:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(module), name)
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

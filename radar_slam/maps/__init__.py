@@ -13,9 +13,7 @@ The on-disk format is specified in docs/map_format.md. The map I/O (`format`, `i
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
+from radar_slam.lazy import lazy_exports
 from radar_slam.maps.config import LocalizerConfig, MapsConfig
 from radar_slam.maps.format import Map, MapError, Session, read_map, write_map
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
@@ -48,7 +46,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__, __dir__ = lazy_exports(__name__, _LAZY)

@@ -24,8 +24,9 @@ Entry points: `generate.generate_sequence(scenario, folder)`, the `synthetic` da
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from radar_slam.lazy import lazy_exports
 
 _EXPORTS = {
     "SCENARIOS": "radar_slam.sim.scenarios",
@@ -54,12 +55,4 @@ if TYPE_CHECKING:
     from radar_slam.sim.scenarios import SCENARIOS, Scenario, get_scenario
 
 
-def __getattr__(name: str) -> object:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(module), name)
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -40,7 +40,7 @@ def localize_command(
     data_root: Path | None = DATA_ROOT_OPTION,
 ) -> None:
     """Localise every scan of SEQ in MAP: global relocalisation, then tracking; writes
-    localization.tum/.csv, a plot and, with ground truth, metrics.json."""
+    localization.tum/.csv, localization_boreas.txt, a plot and, with ground truth, metrics.json."""
     # The localiser's modules load only for this command (not for every `radar-slam` call).
     from radar_slam.maps.evaluate import evaluate_localization
     from radar_slam.maps.localizer import Localization, Localizer

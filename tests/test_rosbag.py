@@ -4,7 +4,9 @@ written directly with rosbags; trajectory bags from a result folder."""
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -63,6 +65,19 @@ def test_tiny_loop_survives_a_bag_round_trip(
 ) -> None:
     bag = open_sequence(write_bag(tiny_loop, tmp_path, kind))
     assert_same_sequence(bag, tiny_loop)
+
+
+@pytest.mark.parametrize("kind", ["sqlite3", "mcap"])
+def test_an_opened_bag_crosses_a_pickle_without_indexing_again(
+    tiny: Sequence, tmp_path: Path, kind: str
+) -> None:
+    """A `radar-slam batch` job carries its opened sequence to a worker process by pickling."""
+    bag = open_sequence(write_bag(tiny, tmp_path, kind))
+    _ = bag.ground_truth
+    with mock.patch.object(BagSequence, "_index_scans", autospec=True) as index:
+        copy = pickle.loads(pickle.dumps(bag))
+    assert index.call_count == 0
+    assert_same_sequence(copy, tiny)
 
 
 @pytest.mark.realdata

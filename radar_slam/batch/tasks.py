@@ -1,14 +1,16 @@
 """Batch runs on Dask: one task per (sequence, configuration), each a full `radar-slam run`.
 
-`run_job` is what a worker executes: the same library code as `radar-slam run` (open the
-sequence with its configuration, `Pipeline.run`, `outputs.write_results`) into the job's own
-result folder, written under a temporary name and renamed when complete. It never raises: a
-failure becomes a `BatchRow` with a one-line error, so one bad sequence does not stop the others.
+`plan_jobs` opens each sequence once, in the submitting process, and `run_job` is what a worker
+executes with it: the same library code as `radar-slam run` (`Pipeline.run`,
+`outputs.write_results`) into the job's own result folder, written under a temporary name and
+renamed when complete. It never raises: a failure becomes a `BatchRow` with a one-line error,
+so one bad sequence does not stop the others.
 
 `run_batch` submits the jobs to a local cluster (`LocalCluster`, N worker processes of one thread
 each) or to an existing scheduler (`tcp://host:8786`), and collects the rows as tasks finish.
 Workers of an existing cluster must see the data root and the output folder at the same paths
-(a shared file system) and have radar-slam installed.
+(a shared file system) and have radar-slam installed: a job carries its opened sequence (the
+scans' paths and the ground truth, no scan), and the worker reads the scans it runs on.
 """
 
 from __future__ import annotations
@@ -23,9 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from radar_slam.batch.grid import GridPoint
+from radar_slam.datasets.frame import RadarSequence
 from radar_slam.errors import RadarSlamError
 from radar_slam.outputs import write_results
-from radar_slam.pipeline import Pipeline, open_configured
+from radar_slam.pipeline import Pipeline, PipelineConfig, open_configurations
 from radar_slam.signals import children_ignore_sigint
 
 log = logging.getLogger(__name__)
@@ -46,23 +49,19 @@ class BatchJob:
     """One run of a batch.
 
     Attributes:
-        sequence: the sequence spec as given (`family/name` or a folder path).
-        label: `family/name` of the opened sequence (for the table).
+        sequence: the opened sequence (shared by the jobs of its loader settings).
+        settings: the run's whole configuration (defaults, family YAML, `--config`, grid).
+        label: `family/name` of the sequence (for the table).
         config_name: the grid configuration's name.
-        overrides: nested config overrides applied after the family YAML and `config_path`.
         folder: the run's result folder (must not exist yet; absolute once placed).
-        config_path: the user's `--config` file, if any (absolute).
-        data_root: the data root (absolute), or None for the default.
         max_frames: process only the first scans.
     """
 
-    sequence: str
+    sequence: RadarSequence
+    settings: PipelineConfig
     label: str
     config_name: str
-    overrides: dict[str, Any]
     folder: Path
-    config_path: Path | None = None
-    data_root: Path | None = None
     max_frames: int | None = None
 
 
@@ -119,10 +118,7 @@ def run_job(job: BatchJob) -> BatchRow:
     of the run itself; the row then carries the error."""
     partial = job.folder.parent / f"{PARTIAL_PREFIX}{job.folder.name}"
     try:
-        sequence, settings = open_configured(
-            job.sequence, job.data_root, job.config_path, job.overrides
-        )
-        results = Pipeline(sequence, settings, max_frames=job.max_frames).run()
+        results = Pipeline(job.sequence, job.settings, max_frames=job.max_frames).run()
         partial.mkdir(parents=True)
         write_results(partial, results)
         partial.rename(job.folder)
@@ -236,8 +232,9 @@ def plan_jobs(
 ) -> list[BatchJob]:
     """One job per (sequence, configuration), checked before anything is submitted.
 
-    Each sequence is opened with each configuration (lazily: no scan is read, but a synthetic
-    sequence is generated here, once, rather than by several workers at the same time). The jobs'
+    Each sequence is opened here, once per distinct `dataset:` section of the grid (no scan is
+    read; a synthetic sequence is generated here, once, rather than by several workers at the
+    same time), and its jobs carry it to the workers, which do not open it again. The jobs'
     folders are relative, `<family>_<name>/<configuration>`: see `place_jobs`.
 
     Raises:
@@ -250,13 +247,11 @@ def plan_jobs(
     config = None if config_path is None else Path(config_path).absolute()
     for spec in sequences:
         label = ""
-        for point in grid:
-            sequence, _ = open_configured(spec, root, config, point.overrides)
+        opened = open_configurations(spec, root, config, [point.overrides for point in grid])
+        for point, (sequence, settings) in zip(grid, opened, strict=True):
             label = f"{sequence.family}/{sequence.name}"
             folder = Path(label.replace("/", "_")) / point.name
-            jobs.append(
-                BatchJob(spec, label, point.name, point.overrides, folder, config, root, max_frames)
-            )
+            jobs.append(BatchJob(sequence, settings, label, point.name, folder, max_frames))
         if label in labels:
             raise RadarSlamError(f"{spec}: the sequence {label} is given twice")
         labels.add(label)

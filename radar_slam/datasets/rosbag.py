@@ -441,6 +441,17 @@ class BagSequence:
         """Close the bag (further frame reads fail)."""
         self._reader.close()
 
+    # -- pickling (a `radar-slam batch` job carries its opened sequence to a worker) ------------
+    def __getstate__(self) -> dict[str, Any]:
+        """The index without the open bag reader (and its connections, which refer to it)."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("_reader", "_connections")}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """The bag reopened at the same path; its scans are not indexed again."""
+        self.__dict__.update(state)
+        self._reader = self._open()
+        self._connections = self._topic_connections(self.topic, (IMAGE_TYPE,))
+
     def __repr__(self) -> str:
         return f"BagSequence({str(self.path)!r}, topic={self.topic!r}, frames={len(self)})"
 

@@ -14,6 +14,7 @@ from radar_slam.pipeline.config import (
     PipelineConfig,
     family_config_path,
     load_config,
+    open_configurations,
     open_configured,
 )
 from radar_slam.pipeline.graph_loops import close_loops_on_graph
@@ -58,6 +59,7 @@ __all__ = [
     "load_config",
     "odometry_factor",
     "open_configured",
+    "open_configurations",
     "review_loops",
     "run_odometry",
     "sequence_label",

@@ -85,15 +85,23 @@ def _user_layers(path: Path | None, overrides: dict[str, Any] | None) -> list[_L
     return layers
 
 
+def _family_layers(family: str | None) -> list[_Layer]:
+    """The family's shipped YAML as a layer (read once here), or none."""
+    if family is None:
+        return []
+    shipped = family_config_path(family)
+    return [(read_yaml(shipped), str(shipped))] if shipped.is_file() else []
+
+
 def _layered(family: str | None, user: list[_Layer]) -> PipelineConfig:
     """Defaults, then the family's shipped YAML (when `family` is given and ships one), then
     the `user` layers in order."""
+    return _merged(_family_layers(family) + user)
+
+
+def _merged(layers: list[_Layer]) -> PipelineConfig:
+    """Defaults, then `layers` in order."""
     config = PipelineConfig()
-    layers = list(user)
-    if family is not None:
-        shipped = family_config_path(family)
-        if shipped.is_file():
-            layers.insert(0, (read_yaml(shipped), str(shipped)))
     for values, source in layers:
         config = merge(PipelineConfig, config, values, source)
     return config
@@ -106,7 +114,7 @@ def open_configured(
     overrides: dict[str, Any] | None = None,
 ) -> tuple[RadarSequence, PipelineConfig]:
     """Open a sequence and load its configuration (defaults, `configs/<family>.yaml`, `path`,
-    then `overrides`, e.g. one configuration of a `radar-slam batch` grid).
+    then `overrides`).
 
     Each file is read once and the sequence is opened once. The user's layers are checked
     first, so that a mistake fails before any data is generated; the sequence is then located
@@ -115,10 +123,36 @@ def open_configured(
     malformed file fails before any work rather than after it; a malformed scan fails when the
     run reads it (the first scan is the run's first step: reading it here would decode it twice).
     """
-    user = _user_layers(path, overrides)
-    _layered(None, user)  # a mistake fails before any data is generated
-    family, location = locate_sequence(spec, data_root)
-    config = _layered(family.name, user)
-    sequence = open_located(family, location, config.dataset)
-    _ = sequence.ground_truth  # a malformed GT file fails now, not after the run
+    ((sequence, config),) = open_configurations(spec, data_root, path, [overrides or {}])
     return sequence, config
+
+
+def open_configurations(
+    spec: str,
+    data_root: Path | None,
+    path: Path | None,
+    overrides: list[dict[str, Any]],
+) -> list[tuple[RadarSequence, PipelineConfig]]:
+    """`open_configured` for several configurations of one sequence (e.g. the grid of a
+    `radar-slam batch`): one (sequence, configuration) per entry of `overrides`, in order.
+
+    Each file is read once, and the sequence is opened once per distinct `dataset:` section (the
+    loader settings): configurations that share it share the opened sequence.
+    """
+    user = _user_layers(path, None)
+    every = [user + ([(extra, "overrides")] if extra else []) for extra in overrides]
+    for layers in every:
+        _merged(layers)  # a mistake fails before any data is generated
+    family, location = locate_sequence(spec, data_root)
+    shipped = _family_layers(family.name)
+    configs = [_merged(shipped + layers) for layers in every]
+    opened: list[tuple[DatasetConfig, RadarSequence]] = []
+    for config in configs:
+        if not any(loader == config.dataset for loader, _ in opened):
+            sequence = open_located(family, location, config.dataset)
+            _ = sequence.ground_truth  # a malformed GT file fails now, not after the run
+            opened.append((config.dataset, sequence))
+    return [
+        (next(seq for loader, seq in opened if loader == config.dataset), config)
+        for config in configs
+    ]

@@ -13,6 +13,7 @@ Modules, in pipeline order:
     render.py     vectorised rendering of one polar scan
     scenarios.py  named scenarios: tiny, tiny_loop, loop, reverse, multisession_a/_b, long, and
                   the driving scenarios (turn_around ... reverse_gear, held out: heldout_*)
+    waypoints.py  the scenarios' routes (lattice waypoints)
     generate.py   build a scene and write a sequence
     writer.py     the files (polar PNGs, global_pose.csv, stamps, world.json, marker)
     figure.py     overview figure (matplotlib)

@@ -1,7 +1,8 @@
 """Named simulation scenarios, deterministic from a seed.
 
-Routes are lattice waypoints (see route.py); the town is laid out with every route of the
-scenario's group protected, so the two sessions of `multisession` share exactly the same town.
+Routes are lattice waypoints (waypoints.py, driven as route.py says); the town is laid out with
+every route of the scenario's group protected, so the two sessions of `multisession` share
+exactly the same town.
 
 | scenario | what | scans | route |
 | --- | --- | --- | --- |
@@ -37,10 +38,34 @@ from radar_slam.sim.physics import PhysicsConfig
 from radar_slam.sim.route import DrivingConfig
 from radar_slam.sim.sensor import SensorConfig
 from radar_slam.sim.town import TownConfig
+from radar_slam.sim.waypoints import (
+    HELD_OUT_JUNCTIONS_ROUTE,
+    HELD_OUT_MIXED_ROUTE,
+    HELD_OUT_REVISITS_ROUTE,
+    HELD_OUT_TOWN_ROUTE,
+    JUNCTION_ROUTE,
+    LONG_CITY_ROUTE,
+    LONG_ROUTE,
+    LOOP_ROUTE,
+    MULTI_A,
+    MULTI_B,
+    REVERSE_GEAR_ROUTE,
+    REVERSE_ROUTE,
+    REVERSE_SESSION_A,
+    REVERSE_SESSION_B,
+    ROUNDABOUT_ROUTE,
+    ROUNDABOUTS_ROUTE,
+    STOP_AND_GO_ROUTE,
+    THREE_POINT_ROUTE,
+    TINY_BLOCK,
+    TINY_LOOP_ROUTE,
+    TINY_ROUTE,
+    TURN_AROUND_ROUTE,
+    U_TURN_ROUTE,
+    Waypoints,
+)
 from radar_slam.sim.world import ObjectConfig
 from raplace import NS_PER_S
-
-Waypoints = tuple[tuple[int, int], ...]
 
 SIM_VERSION = "1.2"
 """Bump when the output for a given scenario and seed changes (regenerates cached sequences).
@@ -101,127 +126,6 @@ class Scenario:
     held_out: bool = False
 
 
-_TINY_ROUTE: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2))
-_LOOP_ROUTE: Waypoints = (
-    (2, 2),
-    (4, 2),
-    (4, 3),
-    (2, 3),
-    (2, 2),
-    (4, 2),
-    (4, 3),
-    (2, 3),
-    (2, 2),
-    (3, 2),
-)
-_TINY_LOOP_ROUTE: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2), (1, 1), (2, 1), (2, 2))
-"""Around one block of the tiny town and on along one and a half of its streets again."""
-_REVERSE_CROSSING = (5, 2)
-"""Where the figure-eight of `reverse` crosses itself (lattice node)."""
-_REVERSE_ROUTE: Waypoints = (
-    # Lap 1: the block on the crossing's (+i, +j) side anticlockwise, straight over the
-    # crossing, the block on its (-i, -j) side clockwise.
-    _REVERSE_CROSSING,
-    (6, 2),
-    (6, 3),
-    (5, 3),
-    (5, 1),
-    (4, 1),
-    (4, 2),
-    _REVERSE_CROSSING,
-    # Lap 2 (a left turn at the crossing): the same figure-eight in the opposite direction.
-    (5, 3),
-    (6, 3),
-    (6, 2),
-    (4, 2),
-    (4, 1),
-    (5, 1),
-    _REVERSE_CROSSING,
-)
-"""A closed circuit (a figure-eight over two diagonal blocks) driven once, then again in the
-opposite direction: every street of it is revisited the other way, in the other lane. The
-crossing turns the route around with an ordinary turn (no U-turn), and every corner is driven
-once as a left and once as a right turn."""
-_MULTI_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (2, 1))
-_MULTI_B: Waypoints = (
-    (4, 4),
-    (4, 2),
-    (3, 2),
-    (3, 3),
-    (1, 3),
-    (1, 2),
-    (2, 2),
-    (2, 4),
-    (4, 4),
-    (4, 3),
-)
-_REVERSE_SESSION_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (3, 1))
-"""A loop around blocks of the town, driven anticlockwise, its first two blocks again so that
-the map session closes its loop."""
-_REVERSE_SESSION_B: Waypoints = tuple(reversed(_REVERSE_SESSION_A))
-"""The same streets clockwise: every street the other way, in the other lane."""
-_TINY_BLOCK: Waypoints = ((1, 1), (2, 1), (2, 2), (1, 2), (1, 1))
-"""Once around one block of the tiny town (the map tests)."""
-_LONG_ROUTE: Waypoints = (
-    (1, 1),
-    (4, 1),
-    (4, 3),
-    (1, 3),
-    (1, 1),
-    (4, 1),
-    (7, 1),
-    (7, 4),
-    (4, 4),
-    (4, 1),
-    (1, 1),
-    (1, 3),
-    (4, 3),
-    (4, 5),
-    (1, 5),
-    (1, 3),
-    (2, 3),
-)
-
-_CITY_RING: Waypoints = ((1, 1), (11, 1), (11, 9), (1, 9), (1, 1))
-"""The outer ring of the `long_city` town (12 x 10 blocks), anticlockwise: 3.9 km."""
-_LONG_CITY_ROUTE: Waypoints = (
-    *_CITY_RING,
-    # A serpentine across the town along x, ending in the far corner.
-    (1, 3),
-    (11, 3),
-    (11, 5),
-    (1, 5),
-    (1, 7),
-    (11, 7),
-    (11, 9),
-    # The ring again, clockwise (every ring street revisited the other way).
-    (11, 1),
-    (1, 1),
-    (1, 9),
-    (11, 9),
-    # A serpentine along y, crossing the first one at every street.
-    (9, 9),
-    (9, 1),
-    (7, 1),
-    (7, 9),
-    (5, 9),
-    (5, 1),
-    (3, 1),
-    (3, 9),
-    (1, 9),
-    # The x serpentine back the other way, then the ring anticlockwise once more.
-    (1, 7),
-    (11, 7),
-    (11, 5),
-    (1, 5),
-    (1, 3),
-    (11, 3),
-    (11, 1),
-    *_CITY_RING,
-)
-"""About 26 km of streets through a 12 x 10 block town (the first 10,000 scans, ~24 km, are
-driven at 8-12 m/s): three laps of the ring (two directions) and two
-serpentines crossing each other and the ring, so most streets are revisited, some in reverse."""
 LONG_CITY_FRAMES = 10_000
 
 _BASE_SCENARIOS: tuple[Scenario, ...] = (
@@ -229,8 +133,8 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         name="tiny",
         description="3 x 3 blocks, 1024 bins (61 m), 60 scans: for unit tests",
         seed=11,
-        waypoints=_TINY_ROUTE,
-        town_routes=(_TINY_ROUTE,),
+        waypoints=TINY_ROUTE,
+        town_routes=(TINY_ROUTE,),
         max_frames=60,
         start_ns=EPOCH_NS + 1 * DAY_NS,
         sensor=_TINY_SENSOR,
@@ -240,8 +144,8 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         name="tiny_loop",
         description="a small loop with a revisit, reduced bins (1024, 61 m): for CI",
         seed=11,
-        waypoints=_TINY_LOOP_ROUTE,
-        town_routes=(_TINY_LOOP_ROUTE,),
+        waypoints=TINY_LOOP_ROUTE,
+        town_routes=(TINY_LOOP_ROUTE,),
         start_ns=EPOCH_NS + 1 * DAY_NS,
         sensor=_TINY_SENSOR,
         town=_TINY_TOWN,
@@ -250,8 +154,8 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         name="loop",
         description="a two-block loop driven twice in the same direction (~2 min)",
         seed=7,
-        waypoints=_LOOP_ROUTE,
-        town_routes=(_LOOP_ROUTE,),
+        waypoints=LOOP_ROUTE,
+        town_routes=(LOOP_ROUTE,),
         start_ns=EPOCH_NS + 2 * DAY_NS,
     ),
     Scenario(
@@ -259,16 +163,16 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         description="a figure-eight driven once, then again in the opposite direction in the "
         "other lane (3.5 m offset)",
         seed=5,
-        waypoints=_REVERSE_ROUTE,
-        town_routes=(_REVERSE_ROUTE,),
+        waypoints=REVERSE_ROUTE,
+        town_routes=(REVERSE_ROUTE,),
         start_ns=EPOCH_NS + 3 * DAY_NS,
     ),
     Scenario(
         name="multisession_a",
         description="session A of a town shared with multisession_b",
         seed=9,
-        waypoints=_MULTI_A,
-        town_routes=(_MULTI_A, _MULTI_B),
+        waypoints=MULTI_A,
+        town_routes=(MULTI_A, MULTI_B),
         session=0,
         start_ns=EPOCH_NS + 4 * DAY_NS,
     ),
@@ -277,8 +181,8 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         description="session B: another route a day later; parked cars, vegetation and "
         "traffic changed",
         seed=9,
-        waypoints=_MULTI_B,
-        town_routes=(_MULTI_A, _MULTI_B),
+        waypoints=MULTI_B,
+        town_routes=(MULTI_A, MULTI_B),
         session=1,
         start_ns=EPOCH_NS + 5 * DAY_NS,
     ),
@@ -286,8 +190,8 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         name="long",
         description="4.5 km through a larger town: three loops, revisits in both directions",
         seed=3,
-        waypoints=_LONG_ROUTE,
-        town_routes=(_LONG_ROUTE,),
+        waypoints=LONG_ROUTE,
+        town_routes=(LONG_ROUTE,),
         start_ns=EPOCH_NS + 6 * DAY_NS,
         town=TownConfig(n_blocks=(8, 7)),
     ),
@@ -296,8 +200,8 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         description="~24 km, 10,000 scans through a 12 x 10 block town, revisits both ways: "
         "the long-drive benchmark (scripts/bench_long.py)",
         seed=13,
-        waypoints=_LONG_CITY_ROUTE,
-        town_routes=(_LONG_CITY_ROUTE,),
+        waypoints=LONG_CITY_ROUTE,
+        town_routes=(LONG_CITY_ROUTE,),
         max_frames=LONG_CITY_FRAMES,
         start_ns=EPOCH_NS + 30 * DAY_NS,
         town=TownConfig(n_blocks=(12, 10)),
@@ -311,8 +215,8 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         name="multisession_reverse_a",
         description="the map session of a reverse pair: a loop around town blocks",
         seed=13,
-        waypoints=_REVERSE_SESSION_A,
-        town_routes=(_REVERSE_SESSION_A,),
+        waypoints=REVERSE_SESSION_A,
+        town_routes=(REVERSE_SESSION_A,),
         session=0,
         start_ns=EPOCH_NS + 7 * DAY_NS,
     ),
@@ -321,8 +225,8 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         description="the same streets the other way round, in the other lane, a day later; "
         "parked cars, vegetation and traffic changed",
         seed=13,
-        waypoints=_REVERSE_SESSION_B,
-        town_routes=(_REVERSE_SESSION_A,),
+        waypoints=REVERSE_SESSION_B,
+        town_routes=(REVERSE_SESSION_A,),
         session=1,
         start_ns=EPOCH_NS + 8 * DAY_NS,
     ),
@@ -330,8 +234,8 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         name="tiny_reverse_a",
         description="once around a block of the tiny town, reduced bins: map tests",
         seed=11,
-        waypoints=_TINY_BLOCK,
-        town_routes=(_TINY_BLOCK,),
+        waypoints=TINY_BLOCK,
+        town_routes=(TINY_BLOCK,),
         max_frames=TINY_REVERSE_FRAMES,
         start_ns=EPOCH_NS + 9 * DAY_NS,
         sensor=_TINY_SENSOR,
@@ -341,8 +245,8 @@ _MAP_SCENARIOS: tuple[Scenario, ...] = (
         name="tiny_reverse_b",
         description="the same block the other way round, other lane, another session",
         seed=11,
-        waypoints=tuple(reversed(_TINY_BLOCK)),
-        town_routes=(_TINY_BLOCK,),
+        waypoints=tuple(reversed(TINY_BLOCK)),
+        town_routes=(TINY_BLOCK,),
         session=1,
         max_frames=TINY_REVERSE_FRAMES,
         start_ns=EPOCH_NS + 10 * DAY_NS,
@@ -366,83 +270,13 @@ OPEN_JUNCTIONS = {"road_half_width_m": (6.8, 7.6), "sidewalk_m": (3.5, 5.0)}
 """Junctions with room for a roundabout (building lines >= 11 m from the street centre)."""
 NARROW_STREETS = {"road_half_width_m": (4.8, 5.4)}
 """Carriageways that need a three-point turn."""
-_TURN_AROUND_ROUTE: Waypoints = ((1, 1), (2, 1), (3, 1), (3, 2), (2, 2), (2, 1), (1, 1), (0, 1))
-_U_TURN_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (3, 1), (2, 1), (1, 1))
-_THREE_POINT_ROUTE: Waypoints = ((1, 0), (1, 1), (1, 2), (1, 1), (1, 0))
-_ROUNDABOUT_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2), (2, 3))
-_STOP_AND_GO_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2), (3, 2))
-_JUNCTION_ROUTE: Waypoints = ((0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3))
-_REVERSE_GEAR_ROUTE: Waypoints = ((0, 1), (1, 1), (2, 1), (2, 2))
-_ROUNDABOUTS_ROUTE: Waypoints = ((0, 1), (3, 1), (3, 2), (1, 2), (1, 3))
-"""Six roundabouts in a row (straight on, straight on, left, left, straight on, right)."""
-_HELD_OUT_TOWN_ROUTE: Waypoints = (
-    (1, 1),
-    (3, 1),
-    (3, 3),
-    (4, 3),
-    (4, 4),
-    (3, 4),
-    (3, 3),
-    (2, 3),
-    (2, 2),
-    (0, 2),
-    (1, 2),
-)
-"""Out, round a block and back along the street it came (as the 25 % drift town drive), on, and
-back again after a U-turn."""
 _HELD_OUT_TOWN_EVENTS = (
     Stop(2, 10.0),
     Stop(8, 5.0),
     Stop(11, 10.0),
     TurnAround(12, "u_turn", 45.0),
 )
-"""The stops and U-turn along `_HELD_OUT_TOWN_ROUTE` (heldout_town, heldout_fast)."""
-_HELD_OUT_JUNCTIONS_ROUTE: Waypoints = (
-    (0, 0),
-    (1, 0),
-    (1, 1),
-    (2, 1),
-    (2, 2),
-    (3, 2),
-    (3, 3),
-    (4, 3),
-    (3, 3),
-    (3, 4),
-    (2, 4),
-    (1, 4),
-    (1, 3),
-    (0, 3),
-)
-"""A staircase of junction turns on small blocks, a U-turn short of a node and back, then a
-reversing stretch and more turns (a held-out drive)."""
-_HELD_OUT_MIXED_ROUTE: Waypoints = (
-    (0, 1),
-    (1, 1),
-    (2, 1),
-    (2, 2),
-    (3, 2),
-    (4, 2),
-    (3, 2),
-    (3, 3),
-    (2, 3),
-    (1, 3),
-    (1, 2),
-)
-_HELD_OUT_REVISITS_ROUTE: Waypoints = (
-    (0, 1),
-    (2, 1),
-    (2, 3),
-    (0, 3),
-    (0, 1),
-    (2, 1),
-    (3, 1),
-    (2, 1),
-    (0, 1),
-    (0, 3),
-    (2, 3),
-)
-"""Round a ring of blocks, on past its start, a U-turn, and back round the ring the other way
-(a held-out drive with revisits in both directions)."""
+"""The stops and U-turn along `HELD_OUT_TOWN_ROUTE` (heldout_town, heldout_fast)."""
 _CI = " Reduced bins (1024, 61 m) for CI."
 _URBAN_SMOOTH = DrivingConfig(min_speed_mps=3.0, cruise_speed_mps=(9.0, 13.5))
 """The smooth lattice drive at urban speeds (<= 14 m/s), slowing for tight corners."""
@@ -453,8 +287,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         name="turn_around",
         description="out along a street, round a block, back along the same street the other way",
         seed=31,
-        waypoints=_TURN_AROUND_ROUTE,
-        town_routes=(_TURN_AROUND_ROUTE,),
+        waypoints=TURN_AROUND_ROUTE,
+        town_routes=(TURN_AROUND_ROUTE,),
         start_ns=EPOCH_NS + 7 * DAY_NS,
         town=TownConfig(n_blocks=(4, 3), block_size_m=(70.0, 110.0)),
         driving=_URBAN_SMOOTH,
@@ -463,8 +297,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         name="u_turn",
         description="a U-turn at full lock in a wide street and back along it",
         seed=32,
-        waypoints=_U_TURN_ROUTE,
-        town_routes=(_U_TURN_ROUTE,),
+        waypoints=U_TURN_ROUTE,
+        town_routes=(U_TURN_ROUTE,),
         start_ns=EPOCH_NS + 8 * DAY_NS,
         town=plan_town(**WIDE_STREETS),
         plan=DrivePlan(events=(TurnAround(3, "u_turn", 40.0),)),
@@ -474,8 +308,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="a three-point turn (forward, reverse, forward at full lock) in a narrow "
         "street",
         seed=33,
-        waypoints=_THREE_POINT_ROUTE,
-        town_routes=(_THREE_POINT_ROUTE,),
+        waypoints=THREE_POINT_ROUTE,
+        town_routes=(THREE_POINT_ROUTE,),
         start_ns=EPOCH_NS + 9 * DAY_NS,
         town=plan_town(**NARROW_STREETS),
         plan=DrivePlan(events=(TurnAround(2, "three_point", 35.0),)),
@@ -484,8 +318,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         name="roundabout",
         description="into a roundabout, 210 degrees round it at constant yaw rate, out left",
         seed=34,
-        waypoints=_ROUNDABOUT_ROUTE,
-        town_routes=(_ROUNDABOUT_ROUTE,),
+        waypoints=ROUNDABOUT_ROUTE,
+        town_routes=(ROUNDABOUT_ROUTE,),
         start_ns=EPOCH_NS + 10 * DAY_NS,
         town=plan_town(**OPEN_JUNCTIONS),
         plan=DrivePlan(events=(Roundabout(2),)),
@@ -494,8 +328,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         name="stop_and_go",
         description="three junction stops (10 s, 3 s, 10 s), braking and accelerating at 3 m/s^2",
         seed=35,
-        waypoints=_STOP_AND_GO_ROUTE,
-        town_routes=(_STOP_AND_GO_ROUTE,),
+        waypoints=STOP_AND_GO_ROUTE,
+        town_routes=(STOP_AND_GO_ROUTE,),
         start_ns=EPOCH_NS + 11 * DAY_NS,
         town=plan_town(),
         plan=DrivePlan(
@@ -508,8 +342,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="five sharp 90-degree junction turns, curvature stepping 0 -> 1/R -> 0, "
         "12-14 m/s between them",
         seed=36,
-        waypoints=_JUNCTION_ROUTE,
-        town_routes=(_JUNCTION_ROUTE,),
+        waypoints=JUNCTION_ROUTE,
+        town_routes=(JUNCTION_ROUTE,),
         start_ns=EPOCH_NS + 12 * DAY_NS,
         town=plan_town(),
         plan=DrivePlan(driving=PlanDrivingConfig(cruise_speed_mps=(12.0, 14.0))),
@@ -518,8 +352,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         name="reverse_gear",
         description="stop, reverse 30 m along the street in reverse gear, stop, drive on",
         seed=37,
-        waypoints=_REVERSE_GEAR_ROUTE,
-        town_routes=(_REVERSE_GEAR_ROUTE,),
+        waypoints=REVERSE_GEAR_ROUTE,
+        town_routes=(REVERSE_GEAR_ROUTE,),
         start_ns=EPOCH_NS + 13 * DAY_NS,
         town=plan_town(),
         plan=DrivePlan(events=(Reverse(1, 60.0, 30.0),)),
@@ -529,8 +363,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="six roundabouts in a row (straight on, left, right), at 12-14 m/s between "
         "them: the yaw rate reverses at every entry and exit",
         seed=38,
-        waypoints=_ROUNDABOUTS_ROUTE,
-        town_routes=(_ROUNDABOUTS_ROUTE,),
+        waypoints=ROUNDABOUTS_ROUTE,
+        town_routes=(ROUNDABOUTS_ROUTE,),
         start_ns=EPOCH_NS + 17 * DAY_NS,
         town=plan_town(**OPEN_JUNCTIONS),
         plan=DrivePlan(
@@ -543,8 +377,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="HELD OUT: 1.2 km through another town: stepped junction turns, a turn back "
         "round a block, three stops, a U-turn",
         seed=41,
-        waypoints=_HELD_OUT_TOWN_ROUTE,
-        town_routes=(_HELD_OUT_TOWN_ROUTE,),
+        waypoints=HELD_OUT_TOWN_ROUTE,
+        town_routes=(HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 14 * DAY_NS,
         town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **WIDE_STREETS),
         plan=DrivePlan(
@@ -558,8 +392,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="HELD OUT: stops, sharp turns, a roundabout, a three-point turn and "
         "reversing in another town",
         seed=42,
-        waypoints=_HELD_OUT_MIXED_ROUTE,
-        town_routes=(_HELD_OUT_MIXED_ROUTE,),
+        waypoints=HELD_OUT_MIXED_ROUTE,
+        town_routes=(HELD_OUT_MIXED_ROUTE,),
         start_ns=EPOCH_NS + 15 * DAY_NS,
         town=plan_town(n_blocks=(5, 4), block_size_m=(80.0, 120.0), **OPEN_JUNCTIONS),
         plan=DrivePlan(
@@ -580,8 +414,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="HELD OUT: a junction-dense staircase in a third town, a U-turn, reversing, "
         "two stops",
         seed=43,
-        waypoints=_HELD_OUT_JUNCTIONS_ROUTE,
-        town_routes=(_HELD_OUT_JUNCTIONS_ROUTE,),
+        waypoints=HELD_OUT_JUNCTIONS_ROUTE,
+        town_routes=(HELD_OUT_JUNCTIONS_ROUTE,),
         start_ns=EPOCH_NS + 16 * DAY_NS,
         town=plan_town(n_blocks=(5, 5), block_size_m=(70.0, 90.0), **WIDE_STREETS),
         plan=DrivePlan(
@@ -600,8 +434,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="HELD OUT: round a ring of blocks in a fourth town, a U-turn, and back round "
         "it the other way; two stops",
         seed=44,
-        waypoints=_HELD_OUT_REVISITS_ROUTE,
-        town_routes=(_HELD_OUT_REVISITS_ROUTE,),
+        waypoints=HELD_OUT_REVISITS_ROUTE,
+        town_routes=(HELD_OUT_REVISITS_ROUTE,),
         start_ns=EPOCH_NS + 18 * DAY_NS,
         town=plan_town(n_blocks=(4, 4), block_size_m=(60.0, 100.0), **WIDE_STREETS),
         plan=DrivePlan(
@@ -615,8 +449,8 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         description="HELD OUT: heldout_town's route in a fifth town at arterial speeds (16-20 "
         "m/s, up to 20 m between scans at 1 Hz)",
         seed=51,
-        waypoints=_HELD_OUT_TOWN_ROUTE,
-        town_routes=(_HELD_OUT_TOWN_ROUTE,),
+        waypoints=HELD_OUT_TOWN_ROUTE,
+        town_routes=(HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 19 * DAY_NS,
         town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **WIDE_STREETS),
         plan=DrivePlan(

@@ -9,6 +9,7 @@ import hashlib
 import json
 from collections.abc import Callable
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from radar_slam.maps.format import (
     Session,
     write_map,
 )
+from raplace import DescriptorExtractor
 
 KEYFRAMES = 5
 
@@ -135,3 +137,32 @@ def test_queries_of_a_map_use_the_descriptor_it_was_made_with() -> None:
 
     assert descriptor_config_of(small_map(settings={"descriptor": {"n_theta": 60}})).n_theta == 60
     assert descriptor_config_of(small_map(settings={})) == LOOP_RAPLACE.descriptor
+
+
+@pytest.mark.parametrize(
+    ("setting", "expected"),
+    [
+        ({"n_theta": 60}, "settings.descriptor.n_theta is 60, a run describes scans with 120"),
+        ({"image": {"cell_m": 0.5}}, "settings.descriptor.image.cell_m is 0.5, a run"),
+    ],
+)
+def test_run_refuses_a_map_described_otherwise_before_any_work(
+    setting: dict[str, object],
+    expected: str,
+    tiny: RadarSequence,
+    synthetic_root: Path,
+    workdir: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A session joins a map by comparing descriptors and adds its own to it: a map whose
+    descriptors a run does not make is refused (one line naming the file and the key), before
+    any scan is read or described."""
+    folder = workdir / "map"
+    write_map(folder, small_map(settings={"keyframe_spacing_m": 4.0, "descriptor": setting}))
+    args: list[str | Path] = ["run", "synthetic/tiny", "--map", folder]
+    args += ["--data-root", synthetic_root]
+    with mock.patch.object(
+        DescriptorExtractor, "__call__", autospec=True, side_effect=DescriptorExtractor.__call__
+    ) as described:
+        assert_refused(capsys, (workdir, synthetic_root), args, f"{folder}: map.json", expected)
+    assert described.call_count == 0

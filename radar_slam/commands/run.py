@@ -109,7 +109,9 @@ def run_command(
         settings = without_loops(settings)
     total = frame_count(seq, max_frames)
     observer = None if viewer is None else RerunViewer(viewer, f"{seq.family}/{seq.name}")
-    queries = None if prior_map is None else InterSessionQueries(prior_map, settings)
+    queries = None  # run --map: a map the session cannot join is refused before the run
+    if prior_map is not None and map_path is not None:
+        queries = InterSessionQueries(prior_map, settings, map_path)
     with progress_bar(total, f"{seq.family}/{seq.name}") as bar:  # until map/ is written
         try:
             results = Pipeline(

@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,7 @@ from radar_slam.maps.build import (
     keyframe_content,
     keyframe_rows,
 )
-from radar_slam.maps.format import EDGE_DTYPE, Map, Session
+from radar_slam.maps.format import EDGE_DTYPE, META_FILE, Map, MapError, Session
 from radar_slam.maps.localizer import (
     MAP_KEY_BASE,
     MAP_SIGMA_XY_M,
@@ -66,7 +67,7 @@ from radar_slam.maps.localizer import (
 )
 from radar_slam.pipeline import BACKEND_REJECT_WEIGHT, PipelineConfig, Results, odometry_factor
 from radar_slam.trajectory import Trajectory
-from raplace import DescriptorExtractor, between, compose, inverse
+from raplace import between, compose, inverse
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +114,28 @@ def map_paths(m: Map) -> FloatArray:
     return np.cumsum(steps)
 
 
+def check_descriptor_settings(m: Map, source: Path | str) -> None:
+    """Refuse a map whose descriptors are not made as a run makes them (`LOOP_RAPLACE`).
+
+    Raises:
+        MapError: names the map file, the key and the first differing setting.
+    """
+    stored = descriptor_config_of(m)
+    made = LOOP_RAPLACE.descriptor
+    if stored == made:
+        return
+    ours, theirs = dataclasses.asdict(made), dataclasses.asdict(stored)
+    key = ""
+    while isinstance(ours, dict):  # down to the first differing setting
+        name = next(k for k in ours if ours[k] != theirs[k])
+        key, ours, theirs = f"{key}.{name}", ours[name], theirs[name]
+    raise MapError(
+        f"{source}: {META_FILE}: settings.descriptor{key} is {theirs!r}, a run describes scans "
+        f"with {ours!r}: a session joins only a map described as it is (make the map again "
+        "with `radar-slam run`)"
+    )
+
+
 class InterSessionQueries:
     """A session's map keyframes looked up among a map's keyframes and verified as the run makes
     them (a `radar_slam.maps.keyframes.KeyframeListener` for `Pipeline(on_keyframe=...)`).
@@ -121,15 +144,24 @@ class InterSessionQueries:
     one passes (one verified loop per query, as the intra-session detector); the decisions wait
     in `verified` for `join_session`, which judges them with the session's optimised path.
     Called from one thread at a time (the run's loop thread or its main thread).
+
+    Each keyframe is described once, by the run: the map's descriptors must be made with the
+    same settings (`LOOP_RAPLACE`, those of every map `radar-slam run` writes), else its
+    keyframes could neither be compared with the session's nor joined by them.
+
+    Args:
+        m: the map.
+        config: the run's settings.
+        source: the map's folder (for the error message).
+
+    Raises:
+        MapError: the map's descriptors are made with other settings.
     """
 
-    def __init__(self, m: Map, config: PipelineConfig) -> None:
+    def __init__(self, m: Map, config: PipelineConfig, source: Path | str = "map") -> None:
+        check_descriptor_settings(m, source)
         self.cfg = config.loop_closure
         self.keyframes = MapKeyframes(m, config)
-        self.descriptor_config = descriptor_config_of(m)
-        self.describe = DescriptorExtractor(self.descriptor_config)
-        self.reuse_descriptor = self.descriptor_config == LOOP_RAPLACE.descriptor
-        """The map's descriptors are made as the run's (`LOOP_RAPLACE`): the run's serve."""
         self.verifier = GeometricVerifier(self.cfg, config.odometry)
         self.verified: dict[int, list[LoopDecision]] = {}
         """Scan index -> its decisions, in the order verified (query_key = scan index,
@@ -148,12 +180,9 @@ class InterSessionQueries:
             scan_index: its index in the session.
             frame: the raw scan.
             twist: (3,) its sweep twist (vx, vy [m/s], yaw rate [rad/s]), or None.
-            descriptor: its RaPlace descriptor made with the run's loop settings (made again
-                here only when the map's descriptor settings differ).
+            descriptor: its RaPlace descriptor made by the run (`LOOP_RAPLACE`, as the map's).
         """
         cfg = self.cfg
-        if not self.reuse_descriptor:
-            descriptor = self.describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
         candidates = [
             c
             for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)

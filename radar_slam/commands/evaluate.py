@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
@@ -90,19 +91,65 @@ MAX_GT_ACCURACY_M = 1e3
 """Upper bound of --gt-accuracy (rejects inf)."""
 
 
+TRAJECTORIES_ARGUMENT = typer.Argument(
+    ...,
+    help="One or more estimated trajectories, then the ground truth (always last).",
+    exists=True,
+    dir_okay=False,
+    readable=True,
+)
+FORMAT_OPTION = typer.Option(
+    TrajectoryFormat.auto,
+    "--format",
+    help="File format: tum (t x y z qx qy qz qw), kitti (3x4 row-major), auto by columns.",
+)
+MAX_DIFF_OPTION = typer.Option(
+    DEFAULT_MAX_TIME_DIFF_NS / NS_PER_MS,
+    "--max-diff-ms",
+    min=0.0,
+    max=MAX_DIFF_MS,
+    help="TUM association tolerance between timestamps, in milliseconds.",
+)
+ESTIMATE_OFFSET_OPTION = typer.Option(
+    False,
+    "--estimate-offset",
+    help="Estimate the GT's clock offset from the first estimate's speed profile, print "
+    "it with its uncertainty, and add rows scored with it applied (TUM files only).",
+)
+GT_OFFSET_OPTION = typer.Option(
+    None,
+    "--gt-offset",
+    help="A known GT clock offset \\[s] (GT minus estimate): add rows scored with it applied.",
+)
+GT_ACCURACY_OPTION = typer.Option(
+    0.0,
+    "--gt-accuracy",
+    min=0.0,
+    max=MAX_GT_ACCURACY_M,
+    help="Position accuracy of the GT \\[m]: drift then uses only segments long enough for "
+    "it (2 for GNSS without RTK: 400-800 m).",
+)
+
+
+@dataclass(frozen=True)
+class EvalInputs:
+    """The files of one `eval`, read.
+
+    Attributes:
+        gt_path, gt: the ground truth's file and trajectory.
+        estimates: row name -> (file, trajectory) of each estimate, in the order given.
+        association: "index" when any file is KITTI, else "timestamp".
+    """
+
+    gt_path: Path
+    gt: Trajectory
+    estimates: dict[str, tuple[Path, Trajectory]]
+    association: Association
+
+
 def eval_command(
-    trajectories: list[Path] = typer.Argument(
-        ...,
-        help="One or more estimated trajectories, then the ground truth (always last).",
-        exists=True,
-        dir_okay=False,
-        readable=True,
-    ),
-    fmt: TrajectoryFormat = typer.Option(
-        TrajectoryFormat.auto,
-        "--format",
-        help="File format: tum (t x y z qx qy qz qw), kitti (3x4 row-major), auto by columns.",
-    ),
+    trajectories: list[Path] = TRAJECTORIES_ARGUMENT,
+    fmt: TrajectoryFormat = FORMAT_OPTION,
     json_path: Path | None = typer.Option(
         None, "--json", help="Also write the metrics as JSON to this file.", dir_okay=False
     ),
@@ -110,32 +157,10 @@ def eval_command(
     rpe_delta: int = typer.Option(
         DEFAULT_RPE_DELTA, "--rpe-delta", min=1, help="RPE pose-pair distance, in frames."
     ),
-    max_diff_ms: float = typer.Option(
-        DEFAULT_MAX_TIME_DIFF_NS / NS_PER_MS,
-        "--max-diff-ms",
-        min=0.0,
-        max=MAX_DIFF_MS,
-        help="TUM association tolerance between timestamps, in milliseconds.",
-    ),
-    estimate_offset: bool = typer.Option(
-        False,
-        "--estimate-offset",
-        help="Estimate the GT's clock offset from the first estimate's speed profile, print "
-        "it with its uncertainty, and add rows scored with it applied (TUM files only).",
-    ),
-    gt_offset_s: float | None = typer.Option(
-        None,
-        "--gt-offset",
-        help="A known GT clock offset \\[s] (GT minus estimate): add rows scored with it applied.",
-    ),
-    gt_accuracy_m: float = typer.Option(
-        0.0,
-        "--gt-accuracy",
-        min=0.0,
-        max=MAX_GT_ACCURACY_M,
-        help="Position accuracy of the GT \\[m]: drift then uses only segments long enough for "
-        "it (2 for GNSS without RTK: 400-800 m).",
-    ),
+    max_diff_ms: float = MAX_DIFF_OPTION,
+    estimate_offset: bool = ESTIMATE_OFFSET_OPTION,
+    gt_offset_s: float | None = GT_OFFSET_OPTION,
+    gt_accuracy_m: float = GT_ACCURACY_OPTION,
 ) -> None:
     """Compare trajectories with ground truth: ATE (aligned and first-pose), RPE, end-point
     error, KITTI drift.
@@ -151,61 +176,97 @@ def eval_command(
         )
     if json_path is not None:
         check_output_file(json_path, "--json", force)
+    inputs = read_inputs(trajectories, fmt, estimate_offset or gt_offset_s is not None)
+    first = next(iter(inputs.estimates.values()))[1]
+    offset = _clock_offset(first, inputs.gt, estimate_offset, gt_offset_s)
+    max_diff_ns = round(max_diff_ms * NS_PER_MS)
+    results = score(inputs, offset, max_diff_ns, rpe_delta, gt_accuracy_m)
+    typer.echo(
+        f"ground truth: {inputs.gt_path} ({len(inputs.gt)} poses, {inputs.gt.length_m():.1f} m); "
+        f"association by {inputs.association}; RPE over {rpe_delta} frame(s)"
+    )
+    if offset is not None:
+        typer.echo(_offset_line(offset, estimate_offset))
+    typer.echo(report_text(results, gt_accuracy_m))
+    if json_path is not None:
+        write_text_atomically(json_path, json_text(metrics_json(results)))
+        typer.echo(f"wrote {json_path}")
+
+
+def read_inputs(trajectories: list[Path], fmt: TrajectoryFormat, offset: bool) -> EvalInputs:
+    """Read the estimates and the ground truth (the last of `trajectories`) in `fmt`.
+
+    Raises:
+        typer.BadParameter: a clock `offset` is asked for KITTI files (no timestamps).
+    """
     *est_paths, gt_path = trajectories
     formats = [
         detect_format(p) if fmt == TrajectoryFormat.auto else fmt.value for p in trajectories
     ]
     association: Association = "index" if "kitti" in formats else "timestamp"
-    if association == "index" and (estimate_offset or gt_offset_s is not None):
+    if association == "index" and offset:
         raise typer.BadParameter(
             "a clock offset needs timestamps: give TUM files", param_hint="--estimate-offset"
         )
     gt = read_trajectory(gt_path, formats[-1])
     estimates = {
-        name: read_trajectory(path, path_fmt)
+        name: (path, read_trajectory(path, path_fmt))
         for name, path, path_fmt in zip(
             trajectory_names(est_paths), est_paths, formats[:-1], strict=True
         )
     }
-    offset = _clock_offset(next(iter(estimates.values())), gt, estimate_offset, gt_offset_s)
+    return EvalInputs(gt_path, gt, estimates, association)
+
+
+def score(
+    inputs: EvalInputs,
+    offset: TimeOffset | None,
+    max_diff_ns: int,
+    rpe_delta: int,
+    gt_accuracy_m: float,
+) -> dict[str, TrajectoryMetrics]:
+    """Each estimate's metrics against the GT, and against the GT read through `offset` too
+    (a labelled row), in the order given.
+
+    Raises:
+        TrajectoryError: an estimate cannot be scored (names its file and the GT's).
+    """
     results: dict[str, TrajectoryMetrics] = {}
-    for (name, est), path in zip(estimates.items(), est_paths, strict=True):
-        references = {name: gt}
+    for name, (path, est) in inputs.estimates.items():
+        references = {name: inputs.gt}
         if offset is not None:
-            shifted = ground_truth_with_offset(gt, est.timestamps_ns, offset.offset_s)
+            shifted = ground_truth_with_offset(inputs.gt, est.timestamps_ns, offset.offset_s)
             references[f"{name} (GT offset {offset.offset_s:+.3f} s)"] = shifted
         for row, reference in references.items():
             try:
                 results[row] = evaluate(
                     est,
                     reference,
-                    by=association,
-                    max_diff_ns=round(max_diff_ms * NS_PER_MS),
+                    by=inputs.association,
+                    max_diff_ns=max_diff_ns,
                     rpe_delta=rpe_delta,
                     gt_accuracy_m=gt_accuracy_m,
                 )
             except TrajectoryError as exc:  # name the files
-                raise TrajectoryError(f"{path} against {gt_path}: {exc}") from None
-    typer.echo(
-        f"ground truth: {gt_path} ({len(gt)} poses, {gt.length_m():.1f} m); "
-        f"association by {association}; RPE over {rpe_delta} frame(s)"
-    )
-    if offset is not None:
-        typer.echo(_offset_line(offset, estimate_offset))
-    typer.echo(format_table(results))
+                raise TrajectoryError(f"{path} against {inputs.gt_path}: {exc}") from None
+    return results
+
+
+def report_text(results: dict[str, TrajectoryMetrics], gt_accuracy_m: float) -> str:
+    """The table of `results`, the drift's segment lengths and, when some drift is missing,
+    why (no trailing newline)."""
     shortest = next(iter(results.values())).drift_min_segment_m
-    typer.echo(
+    lines = [
+        format_table(results),
         f"drift over KITTI segments of {shortest:.0f}-{max(KITTI_SEGMENT_LENGTHS_M):.0f} m"
-        + ("" if gt_accuracy_m == 0 else f" (GT accuracy {gt_accuracy_m:g} m)")
-    )
+        + ("" if gt_accuracy_m == 0 else f" (GT accuracy {gt_accuracy_m:g} m)"),
+    ]
     if any(m.drift_trans_pct is None for m in results.values()):
-        typer.echo(
+        lines.append(
             f"note: drift needs a ground-truth path of at least {shortest:.0f} m between "
             "matched poses; shown as n/a"
         )
-    if json_path is not None:
-        write_text_atomically(json_path, json_text(metrics_json(results)))
-        typer.echo(f"wrote {json_path}")
+    return "\n".join(lines)
 
 
 def _clock_offset(

@@ -234,7 +234,8 @@ def whole_command_rows(args: argparse.Namespace, cores: set[int]) -> list[WholeC
             )
             logger.info(
                 "%s on %d core(s): %d scans, whole command %.1f s = %.1f scans/s (last file at "
-                "%.1f s, CPU %.1f s), in run %.1f scans/s; SLAM ATE %s m; load %.1f -> %.1f",
+                "%.1f s, CPU %.1f s, peak RSS %.0f MiB), in run %.1f scans/s; SLAM ATE %s m; "
+                "load %.1f -> %.1f",
                 name,
                 workers,
                 row.scans,
@@ -242,6 +243,7 @@ def whole_command_rows(args: argparse.Namespace, cores: set[int]) -> list[WholeC
                 row.scans_per_s,
                 row.last_file_s,
                 row.cpu_s,
+                row.peak_rss_mib,
                 row.run_scans_per_s,
                 _f(row.ate_slam_m),
                 row.load_before,

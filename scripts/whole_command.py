@@ -4,7 +4,8 @@ The wall time covers everything a user waits for: the interpreter starting, the 
 the sequence, every scan, the final optimisation and evaluation, and every file of the result
 folder (map/ included). The run's own figure (`metrics.json` `frames_per_second`, the line the
 command prints) covers the scans only; both are reported side by side, with the CPU time of the
-subprocess (user + system [s], what a shared machine distorts least) and the machine's load
+subprocess (user + system [s], what a shared machine distorts least), its peak resident memory
+(RSS, the figure `radar_slam.pipeline.MEMORY_BUDGET_BYTES` bounds) and the machine's load
 average before and after (`os.getloadavg`, one-minute).
 
 The subprocess gets the default configuration and the environment of this process without the
@@ -22,7 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -44,6 +45,7 @@ class WholeCommand:
         wall_s: wall time from its start to its exit [s].
         last_file_s: wall time from its start to the last file written into the result folder [s].
         cpu_s: its CPU time, user + system [s].
+        peak_rss_mib: its peak resident memory [MiB].
         scans_per_s: scans / wall_s (the whole command).
         run_scans_per_s: the run's own figure (scans over the in-run time, `metrics.json`).
         run_s: the run's own time [s].
@@ -58,6 +60,7 @@ class WholeCommand:
     wall_s: float
     last_file_s: float
     cpu_s: float
+    peak_rss_mib: float
     scans_per_s: float
     run_scans_per_s: float
     run_s: float
@@ -82,7 +85,9 @@ def run_arguments(spec: str, out: Path, options: Sequence[str]) -> list[str]:
     return [sys.executable, "-m", CLI_MODULE, "run", spec, "--out", str(out), *options]
 
 
-def on_cores(command: list[str], cores: Sequence[int]) -> tuple[list[str], object]:
+def on_cores(
+    command: list[str], cores: Sequence[int]
+) -> tuple[list[str], Callable[[], None] | None]:
     """(command, preexec_fn) running `command` on `cores`: `taskset -c` when available."""
     listed = ",".join(str(c) for c in sorted(cores))
     taskset = shutil.which("taskset")
@@ -97,10 +102,28 @@ def last_write_epoch(folder: Path) -> float:
     return max((p.stat().st_mtime for p in folder.rglob("*") if p.is_file()), default=0.0)
 
 
-def children_cpu_s() -> float:
-    """User + system CPU time of the waited-for children so far [s]."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
+KIB_PER_MIB = 1024
+"""`ru_maxrss` is in KiB on Linux."""
+
+
+def run_child(
+    command: list[str], cwd: str, preexec: Callable[[], None] | None
+) -> tuple[int, str, resource.struct_rusage]:
+    """Run `command` to its end: (exit code, its stderr, its own resource usage)."""
+    with tempfile.TemporaryFile(mode="w+") as stderr:
+        child = subprocess.Popen(
+            command,
+            cwd=cwd,  # `python -m` puts the current folder first on the module path
+            env=child_environment(),
+            preexec_fn=preexec,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+            text=True,
+        )
+        _, status, usage = os.wait4(child.pid, 0)
+        child.returncode = os.waitstatus_to_exitcode(status)
+        stderr.seek(0)
+        return child.returncode, stderr.read(), usage
 
 
 def time_run(
@@ -122,22 +145,11 @@ def time_run(
         out = Path(tmp) / "run"
         command, preexec = on_cores(run_arguments(spec, out, options), cores)
         load_before = os.getloadavg()[0]
-        cpu_before = children_cpu_s()
         start_epoch, start = time.time(), time.perf_counter()
-        done = subprocess.run(
-            command,
-            cwd=tmp,  # `python -m` puts the current folder first on the module path
-            env=child_environment(),
-            preexec_fn=preexec,  # type: ignore[arg-type]
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-            check=False,
-        )
+        code, errors, usage = run_child(command, tmp, preexec)
         wall = time.perf_counter() - start
-        cpu = children_cpu_s() - cpu_before
-        if done.returncode != 0:
-            raise SystemExit(f"{' '.join(command)} failed:\n{done.stderr}")
+        if code != 0:
+            raise SystemExit(f"{' '.join(command)} failed:\n{errors}")
         metrics = json.loads((out / METRICS_FILE).read_text())
         last_file = last_write_epoch(out) - start_epoch
     scans = int(metrics["frames"])
@@ -147,7 +159,8 @@ def time_run(
         scans=scans,
         wall_s=wall,
         last_file_s=last_file,
-        cpu_s=cpu,
+        cpu_s=usage.ru_utime + usage.ru_stime,
+        peak_rss_mib=usage.ru_maxrss / KIB_PER_MIB,
         scans_per_s=scans / wall,
         run_scans_per_s=float(metrics["frames_per_second"]),
         run_s=float(metrics["seconds"]),
@@ -163,15 +176,16 @@ def table(rows: Sequence[WholeCommand]) -> str:
     """The timed runs as a Markdown table."""
     lines = [
         "| sequence | cores | scans | whole command [s] | scans/s whole command "
-        "| scans/s in run | last file [s] | CPU [s] | SLAM ATE [m] | loops | load before/after |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| scans/s in run | last file [s] | CPU [s] | peak RSS [MiB] | SLAM ATE [m] | loops "
+        "| load before/after |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         ate = "n/a" if r.ate_slam_m is None else f"{r.ate_slam_m:.3f}"
         lines.append(
             f"| `{r.sequence}` | {len(r.cores)} | {r.scans} | {r.wall_s:.1f} "
             f"| {r.scans_per_s:.1f} | {r.run_scans_per_s:.1f} | {r.last_file_s:.1f} "
-            f"| {r.cpu_s:.1f} | {ate} | {r.loops_accepted} "
+            f"| {r.cpu_s:.1f} | {r.peak_rss_mib:.0f} | {ate} | {r.loops_accepted} "
             f"| {r.load_before:.1f} / {r.load_after:.1f} |"
         )
     return "\n".join(lines)

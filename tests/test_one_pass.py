@@ -22,6 +22,7 @@ from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.g2o import G2oEdge, G2oGraph
 from radar_slam.pipeline import (
+    MEMORY_BUDGET_SCANS,
     Pipeline,
     PipelineConfig,
     Progress,
@@ -31,7 +32,7 @@ from radar_slam.pipeline import (
 )
 from raplace import between
 
-DRIVE_SCANS = 10_000
+DRIVE_SCANS = MEMORY_BUDGET_SCANS
 """The drive the memory budget is stated for (MulRan resolution, default config)."""
 GROWTH_BUDGET_BYTES = 600 * 2**20
 """What a run may keep per scan, times `DRIVE_SCANS` (docs/benchmarks.md, Memory budget)."""

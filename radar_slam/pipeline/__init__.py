@@ -27,7 +27,7 @@ from radar_slam.pipeline.records import (
     Results,
     SlamMetrics,
 )
-from radar_slam.pipeline.slam import Pipeline
+from radar_slam.pipeline.slam import MEMORY_BUDGET_BYTES, MEMORY_BUDGET_SCANS, Pipeline
 from radar_slam.pipeline.steps import (
     BACKEND_REJECT_WEIGHT,
     StepTimer,
@@ -42,6 +42,8 @@ from radar_slam.pipeline.steps import (
 
 __all__ = [
     "BACKEND_REJECT_WEIGHT",
+    "MEMORY_BUDGET_BYTES",
+    "MEMORY_BUDGET_SCANS",
     "GraphLoopsRun",
     "OdometryRun",
     "Pipeline",

@@ -89,6 +89,13 @@ from radar_slam.pipeline.steps import (
 )
 from radar_slam.trajectory import Trajectory
 
+MEMORY_BUDGET_BYTES = 1536 * 2**20
+"""Peak resident memory (RSS) of a whole `radar-slam run` over `MEMORY_BUDGET_SCANS` scans at
+MulRan resolution (400 x 3360) with the default configuration: a run keeps no scan, only what it
+needs of each (records, descriptors, odometry results, graph). Stated in the README (Limits);
+its breakdown is in docs/benchmarks.md (Memory budget)."""
+MEMORY_BUDGET_SCANS = 10_000
+"""The drive length `MEMORY_BUDGET_BYTES` is stated for [scans]."""
 LOOP_UPDATE_INTERVAL = 10
 """Scans between ISAM2 updates that carry loops (each loop update re-eliminates the path back to
 the loop's older end; the final pass refines the result)."""

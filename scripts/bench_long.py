@@ -499,7 +499,7 @@ DOC_SECTION = "Long drive"
 """The section of docs/benchmarks.md this script writes with `--write-doc`."""
 
 
-def main() -> None:
+def parse_arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=None, help="first N scans only")
     parser.add_argument("--every", type=int, default=1000, help="scans per window")
@@ -510,7 +510,30 @@ def main() -> None:
     parser.add_argument("--g2o", type=Path, default=None, help="write the final graph (g2o)")
     parser.add_argument("--data-root", type=Path, default=None)
     parser.add_argument("--config", type=Path, default=None, help="YAML overrides")
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+@dataclass
+class Measured:
+    """What one benchmark run measured.
+
+    Attributes:
+        label: `family/name` of the drive.
+        results: the run's results.
+        windows: the recorder's windows, in scan order.
+        query_ms, fresh_query_ms: the standalone query times after and before the run [ms]
+            ("new": with the invariant shortlist, "old": without).
+    """
+
+    label: str
+    results: Results
+    windows: list[Window]
+    query_ms: dict[str, float]
+    fresh_query_ms: dict[str, float]
+
+
+def run_measured(args: argparse.Namespace) -> Measured:
+    """The run over the long drive with its recorder, and the standalone queries around it."""
     core = pin_to_one_core()
     sequence = long_sequence(args.frames, args.data_root)
     # One core, sequential: the probes query the database the loop detector fills, which a loop
@@ -529,95 +552,145 @@ def main() -> None:
     print(f"{sequence.family}/{sequence.name}: {pipeline.frames} scans on core {core}")
     recorder.start()
     results = pipeline.run()
+    query_ms = standalone_query_ms(probe, retrieval)  # the same, after the run
+    label = f"{sequence.family}/{sequence.name}"
+    return Measured(label, results, recorder.windows, query_ms, fresh_query_ms)
+
+
+@dataclass(frozen=True)
+class Bars:
+    """The figures the bars judge (first and last `BAR_SPAN_SCANS` scans).
+
+    Attributes:
+        first, last: scans/s on the wall clock.
+        first_cpu, last_cpu: scans per CPU second.
+        speed_ms: the reference workload's CPU time over the first span [ms].
+        first_ref, last_ref: scans per CPU second at the first span's machine speed.
+        peak_mb: the peak RSS [MiB].
+    """
+
+    first: float
+    last: float
+    first_cpu: float
+    last_cpu: float
+    speed_ms: float
+    first_ref: float
+    last_ref: float
+    peak_mb: float
+
+    @classmethod
+    def of(cls, windows: list[Window], every: int) -> Bars:
+        span = max(1, BAR_SPAN_SCANS // every)
+        head, tail = windows[:span], windows[-span:]
+        speed = float(np.median([w.reference_ms for w in head]))
+        return cls(
+            span_scans_per_s(head),
+            span_scans_per_s(tail),
+            span_cpu_scans_per_s(head),
+            span_cpu_scans_per_s(tail),
+            speed,
+            span_cpu_scans_per_s(head, speed),
+            span_cpu_scans_per_s(tail, speed),
+            max(w.peak_rss_mb for w in windows),
+        )
+
+
+def print_run(results: Results, wrong: list[dict[str, float]]) -> None:
+    """The run's summary line and its false loops."""
     m = results.metrics
     print(
         f"done: {m.frames} scans in {m.seconds:.1f} s ({m.frames_per_second:.1f} scans/s), "
         f"loops {m.loops_accepted} accepted ({m.loops_accepted_true} true), "
         f"ATE odometry {m.ate_odometry_m} m, SLAM {m.ate_slam_m} m"
     )
-    wrong = false_loops(results)
     for row in wrong:
         print(
             f"false loop {row['query']} -> {row['match']}: RaPlace distance "
             f"{row['distance']:.3f}, off by {row['error_m']:.2f} m / {row['error_deg']:.2f} deg; "
             f"{row['reason']}"
         )
-    if args.g2o is not None:
-        write_pose_graph(args.g2o, results.graph)
-    query_ms = standalone_query_ms(probe, retrieval)  # the same, after the run
-    windows = recorder.windows
-    span = max(1, BAR_SPAN_SCANS // args.every)
-    first, last = span_scans_per_s(windows[:span]), span_scans_per_s(windows[-span:])
-    ratio = last / first
-    peak = max(w.peak_rss_mb for w in windows)
+
+
+def print_bars(bars: Bars, measured: Measured, keyframes: int) -> None:
+    """Each bar's figures and verdict."""
+    ratio = bars.last / bars.first
     print(
-        f"throughput  first {BAR_SPAN_SCANS} scans {first:.1f}, last {last:.1f} scans/s "
+        f"throughput  first {BAR_SPAN_SCANS} scans {bars.first:.1f}, last {bars.last:.1f} scans/s "
         f"({100 * (ratio - 1):+.1f} %)   bar within 20 %: "
         f"{verdict(abs(ratio - 1) <= THROUGHPUT_TOLERANCE)}"
     )
-    first_cpu, last_cpu = (
-        span_cpu_scans_per_s(windows[:span]),
-        span_cpu_scans_per_s(windows[-span:]),
-    )
     print(
-        f"            per CPU second: first {first_cpu:.1f}, last {last_cpu:.1f} "
-        f"({100 * (last_cpu / first_cpu - 1):+.1f} %)"
+        f"            per CPU second: first {bars.first_cpu:.1f}, last {bars.last_cpu:.1f} "
+        f"({100 * (bars.last_cpu / bars.first_cpu - 1):+.1f} %)"
     )
-    speed = float(np.median([w.reference_ms for w in windows[:span]]))
-    first_ref = span_cpu_scans_per_s(windows[:span], speed)
-    last_ref = span_cpu_scans_per_s(windows[-span:], speed)
+    at_speed = bars.last_ref / bars.first_ref - 1
     print(
         f"            per CPU second at the first {BAR_SPAN_SCANS} scans' machine speed (reference "
-        f"workload {speed:.1f} ms CPU, last {windows[-1].reference_ms:.1f} ms): first "
-        f"{first_ref:.1f}, last {last_ref:.1f} ({100 * (last_ref / first_ref - 1):+.1f} %)   "
-        f"bar within 20 %: {verdict(abs(last_ref / first_ref - 1) <= THROUGHPUT_TOLERANCE)}"
+        f"workload {bars.speed_ms:.1f} ms CPU, last {measured.windows[-1].reference_ms:.1f} ms): "
+        f"first {bars.first_ref:.1f}, last {bars.last_ref:.1f} ({100 * at_speed:+.1f} %)   "
+        f"bar within 20 %: {verdict(abs(at_speed) <= THROUGHPUT_TOLERANCE)}"
     )
+    peak = bars.peak_mb
     print(f"memory      peak RSS {peak:.0f} MB   bar <= 1.5 GB: {verdict(peak <= MEMORY_BAR_MB)}")
+    after, before = measured.query_ms, measured.fresh_query_ms
     print(
-        f"place query over {args.keyframes} keyframes: {query_ms['new']:.2f} ms after the run, "
-        f"{fresh_query_ms['new']:.2f} ms before it (without the invariant shortlist "
-        f"{query_ms['old']:.2f} / {fresh_query_ms['old']:.2f} ms)   "
-        f"bar <= 5 ms: {verdict(query_ms['new'] <= QUERY_BAR_MS)}"
+        f"place query over {keyframes} keyframes: {after['new']:.2f} ms after the run, "
+        f"{before['new']:.2f} ms before it (without the invariant shortlist "
+        f"{after['old']:.2f} / {before['old']:.2f} ms)   "
+        f"bar <= 5 ms: {verdict(after['new'] <= QUERY_BAR_MS)}"
     )
-    if args.write_doc:
-        from benchmark_doc import markdown_table, update_section
 
-        rows = [
-            [
-                "scans",
-                f"{m.frames:,} in {m.seconds:.0f} s",
-                "",
-            ],
-            [
-                f"scans/s, first -> last {BAR_SPAN_SCANS:,} scans",
-                f"{first:.1f} -> {last:.1f} ({100 * (ratio - 1):+.1f} % on the wall clock, "
-                f"{100 * (last_ref / first_ref - 1):+.1f} % at machine speed)",
-                "within 20 %",
-            ],
-            ["peak memory (RSS)", f"{peak:,.0f} MB", "<= 1.5 GB"],
-            [
-                f"place query over {args.keyframes:,} keyframes, after / before the run",
-                f"{query_ms['new']:.2f} / {fresh_query_ms['new']:.2f} ms",
-                "<= 5 ms",
-            ],
-            [
-                "loops accepted / true",
-                f"{m.loops_accepted} / {m.loops_accepted_true}",
-                "",
-            ],
-            ["ATE odometry -> SLAM", f"{_m(m.ate_odometry_m)} -> {_m(m.ate_slam_m)} m", ""],
-        ]
-        table = markdown_table(["what", "measured", "bar"], rows)
-        update_section(DOC_SECTION, table, script="scripts/bench_long.py")
-    plot(args.plot, windows, f"{sequence.family}/{sequence.name}: {m.frames} scans")
+
+def write_doc(bars: Bars, measured: Measured, keyframes: int) -> None:
+    """The table of docs/benchmarks.md's `DOC_SECTION`."""
+    from benchmark_doc import markdown_table, update_section
+
+    m = measured.results.metrics
+    after, before = measured.query_ms, measured.fresh_query_ms
+    rows = [
+        ["scans", f"{m.frames:,} in {m.seconds:.0f} s", ""],
+        [
+            f"scans/s, first -> last {BAR_SPAN_SCANS:,} scans",
+            f"{bars.first:.1f} -> {bars.last:.1f} ({100 * (bars.last / bars.first - 1):+.1f} % "
+            f"on the wall clock, {100 * (bars.last_ref / bars.first_ref - 1):+.1f} % at machine "
+            "speed)",
+            "within 20 %",
+        ],
+        ["peak memory (RSS)", f"{bars.peak_mb:,.0f} MB", "<= 1.5 GB"],
+        [
+            f"place query over {keyframes:,} keyframes, after / before the run",
+            f"{after['new']:.2f} / {before['new']:.2f} ms",
+            "<= 5 ms",
+        ],
+        ["loops accepted / true", f"{m.loops_accepted} / {m.loops_accepted_true}", ""],
+        ["ATE odometry -> SLAM", f"{_m(m.ate_odometry_m)} -> {_m(m.ate_slam_m)} m", ""],
+    ]
+    table = markdown_table(["what", "measured", "bar"], rows)
+    update_section(DOC_SECTION, table, script="scripts/bench_long.py")
+
+
+def main() -> None:
+    args = parse_arguments()
+    measured = run_measured(args)
+    results = measured.results
+    wrong = false_loops(results)
+    print_run(results, wrong)
+    if args.g2o is not None:
+        write_pose_graph(args.g2o, results.graph)
+    bars = Bars.of(measured.windows, args.every)
+    print_bars(bars, measured, args.keyframes)
+    if args.write_doc:
+        write_doc(bars, measured, args.keyframes)
+    m = results.metrics
+    plot(args.plot, measured.windows, f"{measured.label}: {m.frames} scans")
     print(f"plot in {args.plot}")
     if args.json is not None:
         report = {
-            "sequence": f"{sequence.family}/{sequence.name}",
+            "sequence": measured.label,
             "metrics": m.to_dict(),
-            "windows": [asdict(w) for w in windows],
-            "standalone_query_ms": query_ms,
-            "standalone_query_ms_before_run": fresh_query_ms,
+            "windows": [asdict(w) for w in measured.windows],
+            "standalone_query_ms": measured.query_ms,
+            "standalone_query_ms_before_run": measured.fresh_query_ms,
             "keyframes": args.keyframes,
             "false_loops": wrong,
         }

@@ -283,7 +283,7 @@ SPEED_SECTION = "Odometry speed"
 """The sections of docs/benchmarks.md this script writes with `--write-doc`."""
 
 
-def main() -> None:
+def parse_arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=40, help="frames to register")
     parser.add_argument("--speed", type=float, default=8.0, help="forward speed [m/s]")
@@ -321,31 +321,31 @@ def main() -> None:
     parser.add_argument(
         "--plot-dir", type=Path, default=None, help="save a trajectory plot per --sequence here"
     )
-    args = parser.parse_args()
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
-    cv2.setNumThreads(1)  # one core; numpy's FFT is single-threaded already
-    config = None if args.config is None else load_config(None, args.config).odometry
-    if args.sequence or args.held_out:
-        specs = [(spec, False) for spec in args.sequence] + [(s, True) for s in args.held_out]
-        rows = [
-            bench_sequence(
-                spec, args.data_root, args.max_frames, args.plot_dir, stride, held, config
-            )
-            for spec, held in specs
-            for stride in args.stride or [1]
-        ]
-        table = markdown_table(rows)
-        logger.info("\n%s", table)
-        if args.table is not None:
-            tmp = args.table.with_name(args.table.name + ".tmp")
-            tmp.write_text(table)
-            tmp.replace(args.table)
-        if args.write_doc:
-            from benchmark_doc import update_section
+    return parser.parse_args()
 
-            update_section(ACCURACY_SECTION, table, script="scripts/bench_odometry.py")
-        return
 
+def bench_sequences(args: argparse.Namespace, config: OdometryConfig | None) -> None:
+    """The accuracy table over `--sequence` and `--held-out`, one line per stride."""
+    specs = [(spec, False) for spec in args.sequence] + [(s, True) for s in args.held_out]
+    rows = [
+        bench_sequence(spec, args.data_root, args.max_frames, args.plot_dir, stride, held, config)
+        for spec, held in specs
+        for stride in args.stride or [1]
+    ]
+    table = markdown_table(rows)
+    logger.info("\n%s", table)
+    if args.table is not None:
+        tmp = args.table.with_name(args.table.name + ".tmp")
+        tmp.write_text(table)
+        tmp.replace(args.table)
+    if args.write_doc:
+        from benchmark_doc import update_section
+
+        update_section(ACCURACY_SECTION, table, script="scripts/bench_odometry.py")
+
+
+def bench_speed(args: argparse.Namespace, config: OdometryConfig | None) -> None:
+    """The speed of registering frames rendered from one MulRan scan at a known motion."""
     world = world_scan(args.scan)
     azimuths = mulran_azimuths()
     twist = np.array([args.speed, 0.0, np.deg2rad(args.yaw_rate)])
@@ -398,6 +398,17 @@ def main() -> None:
             f"| {np.percentile(ms, 95):.1f} ms | {1e3 / ms.mean():.0f} |"
         )
         update_section(SPEED_SECTION, speed, script="scripts/bench_odometry.py")
+
+
+def main() -> None:
+    args = parse_arguments()
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    cv2.setNumThreads(1)  # one core; numpy's FFT is single-threaded already
+    config = None if args.config is None else load_config(None, args.config).odometry
+    if args.sequence or args.held_out:
+        bench_sequences(args, config)
+    else:
+        bench_speed(args, config)
 
 
 if __name__ == "__main__":

@@ -253,6 +253,42 @@ def whole_command_rows(args: argparse.Namespace, cores: set[int]) -> list[WholeC
     return rows
 
 
+def injected_row(
+    spec: str,
+    sequence: RadarSequence,
+    config: PipelineConfig,
+    args: argparse.Namespace,
+    results: Results,
+) -> dict[str, object]:
+    """The robustness experiment (`--inject-false F`) on `sequence`: its report row, with the
+    injected false loops verified and accepted and the SLAM ATE's rise over `results`'."""
+    injected, cpu, passed = run_once(sequence, config, args.max_frames, args.inject_false)
+    row = report(f"{spec} + {args.inject_false:.0%} false", injected, cpu)
+    accepted_false = sum(
+        1
+        for d, t in zip(injected.loops, injected.true_loops, strict=True)
+        if d.accepted and t is False
+    )
+    base, slam = results.metrics.ate_slam_m, injected.metrics.ate_slam_m
+    rise = None if not base or slam is None else slam / base - 1.0
+    row.update(
+        injected_false_verified=passed,
+        injected_false_accepted=accepted_false,
+        ate_slam_rise=rise,
+    )
+    logger.info(
+        "%s: %d injected false loops passed the fake verifier, %d accepted; "
+        "SLAM ATE %s -> %s m (%s)",
+        spec,
+        passed,
+        accepted_false,
+        _f(base),
+        _f(slam),
+        "n/a" if rise is None else f"{100 * rise:+.1f} %",
+    )
+    return row
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sequences", nargs="*", default=list(DEFAULT_SEQUENCES))
@@ -311,31 +347,7 @@ def main() -> None:
         rows += paired
         logger.info("%s\n%s", name, side_by_side(paired))
         if args.inject_false is not None:
-            injected, cpu, passed = run_once(sequence, config, args.max_frames, args.inject_false)
-            row = report(f"{spec} + {args.inject_false:.0%} false", injected, cpu)
-            accepted_false = sum(
-                1
-                for d, t in zip(injected.loops, injected.true_loops, strict=True)
-                if d.accepted and t is False
-            )
-            base, slam = results.metrics.ate_slam_m, injected.metrics.ate_slam_m
-            rise = None if not base or slam is None else slam / base - 1.0
-            row.update(
-                injected_false_verified=passed,
-                injected_false_accepted=accepted_false,
-                ate_slam_rise=rise,
-            )
-            logger.info(
-                "%s: %d injected false loops passed the fake verifier, %d accepted; "
-                "SLAM ATE %s -> %s m (%s)",
-                spec,
-                passed,
-                accepted_false,
-                _f(base),
-                _f(slam),
-                "n/a" if rise is None else f"{100 * rise:+.1f} %",
-            )
-            rows.append(row)
+            rows.append(injected_row(spec, sequence, config, args, results))
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=2, default=float) + "\n")
     if args.write_doc:

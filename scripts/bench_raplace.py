@@ -191,30 +191,24 @@ DOC_SECTION = "Place recognition speed"
 """The section of docs/benchmarks.md this script writes with `--write-doc`."""
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--keyframes", type=int, nargs="+", default=[5000, 20000])
-    parser.add_argument("--repeats", type=int, default=50)
-    parser.add_argument("--scan", type=Path, default=MULRAN_SCAN, help="raw MulRan scan (CSV)")
-    parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
-    args = parser.parse_args()
-    core = pin_to_one_core()
-    if args.scan.exists():
-        polar, azimuths, res = read_mulran_csv(args.scan)
-        source = args.scan.name
-    else:
-        polar, azimuths, res = synthetic_scan()
-        source = "synthetic"
-    cfg = RaPlaceConfig()
-    extractor = DescriptorExtractor(cfg.descriptor)
-    print(f"raplace benchmark on CPU core {core}; scan {source} {polar.shape}")
+Row = list[str]
+"""One line of the docs table: what, time, bar, finds the original."""
+PolarScan = tuple[NDArray[np.uint8], NDArray[np.float64], float]
+"""(polar (n_azimuths, n_bins) uint8, CCW azimuths [rad], range resolution [m])."""
 
-    descriptor_ms = median_ms(lambda: extractor(polar, azimuths, res), args.repeats)
+
+def descriptor_rows(
+    scan: PolarScan, cfg: RaPlaceConfig, repeats: int
+) -> tuple[list[Row], NDArray[np.float32]]:
+    """The descriptor's time against skimage's radon; returns the rows and the descriptor."""
+    polar, azimuths, res = scan
+    extractor = DescriptorExtractor(cfg.descriptor)
+    descriptor_ms = median_ms(lambda: extractor(polar, azimuths, res), repeats)
     cart = extractor.imager(polar, azimuths, res)
-    imager_ms = median_ms(lambda: extractor.imager(polar, azimuths, res), args.repeats)
+    imager_ms = median_ms(lambda: extractor.imager(polar, azimuths, res), repeats)
     ours = extractor(polar, azimuths, res)
     reference = radon_descriptor(cart, extractor)
-    radon_ms = median_ms(lambda: radon_descriptor(cart, extractor), max(3, args.repeats // 10))
+    radon_ms = median_ms(lambda: radon_descriptor(cart, extractor), max(3, repeats // 10))
     agreement = float(np.corrcoef(ours.ravel(), reference.ravel())[0, 1])
     print(
         f"descriptor {cfg.descriptor.n_theta}x{cfg.descriptor.n_freq} from image "
@@ -229,7 +223,6 @@ def main() -> None:
         f"ratio {(radon_ms + imager_ms) / descriptor_ms:.1f}x; descriptor correlation "
         f"{agreement:.4f}"
     )
-
     rows = [
         [
             "RaPlace descriptor of one scan",
@@ -244,33 +237,36 @@ def main() -> None:
             "",
         ],
     ]
-    for n_keyframes in args.keyframes:
-        rows += query_benchmark(ours, n_keyframes, cfg.retrieval, args.repeats)
+    return rows, ours
 
+
+def scancontext_and_pose_rows(
+    scan: PolarScan, cfg: RaPlaceConfig, repeats: int, n_sc: int
+) -> list[Row]:
+    """Radar Scan Context (descriptor, query over `n_sc`) and the relative pose's time."""
+    polar, azimuths, res = scan
     sc_extractor = ScanContextExtractor(cfg.scancontext)
     context = sc_extractor(polar, azimuths, res)
-    sc_ms = median_ms(lambda: sc_extractor(polar, azimuths, res), args.repeats)
+    sc_ms = median_ms(lambda: sc_extractor(polar, azimuths, res), repeats)
     rng = np.random.default_rng(2)
-    n_sc = args.keyframes[0]
     contexts = context[None] * rng.uniform(0.5, 1.5, (n_sc, *context.shape))
     sc_recognizer = ScanContextRecognizer(cfg.scancontext)
     sc_recognizer.add_batch(contexts.astype(np.float32), np.arange(n_sc))
-    sc_query_ms = median_ms(lambda: sc_recognizer.query(context, k=5), args.repeats)
+    sc_query_ms = median_ms(lambda: sc_recognizer.query(context, k=5), repeats)
     print(
         f"scan context {cfg.scancontext.n_rings}x{cfg.scancontext.n_sectors}: "
         f"{sc_ms:.2f} ms per scan, query over {n_sc}: {sc_query_ms:.2f} ms"
     )
-
     pose = PoseEstimator(cfg.pose)
     image = pose.image(polar, azimuths, res)
     turned = np.rot90(image, 1).copy()
-    pose_image_ms = median_ms(lambda: pose.image(polar, azimuths, res), args.repeats)
-    pose_ms = median_ms(lambda: pose.estimate(image, turned), max(3, args.repeats // 5))
+    pose_image_ms = median_ms(lambda: pose.image(polar, azimuths, res), repeats)
+    pose_ms = median_ms(lambda: pose.estimate(image, turned), max(3, repeats // 5))
     print(
         f"relative pose on {image.shape[0]}^2 images @ {cfg.pose.image.cell_m} m: "
         f"{pose_ms:.1f} ms (+ {pose_image_ms:.1f} ms per image)"
     )
-    rows += [
+    return [
         [
             f"Radar Scan Context: descriptor / query over {n_sc:,}",
             f"{sc_ms:.1f} ms / {sc_query_ms:.1f} ms",
@@ -284,6 +280,28 @@ def main() -> None:
             "",
         ],
     ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--keyframes", type=int, nargs="+", default=[5000, 20000])
+    parser.add_argument("--repeats", type=int, default=50)
+    parser.add_argument("--scan", type=Path, default=MULRAN_SCAN, help="raw MulRan scan (CSV)")
+    parser.add_argument("--write-doc", action="store_true", help="write docs/benchmarks.md")
+    args = parser.parse_args()
+    core = pin_to_one_core()
+    if args.scan.exists():
+        scan = read_mulran_csv(args.scan)
+        source = args.scan.name
+    else:
+        scan = synthetic_scan()
+        source = "synthetic"
+    cfg = RaPlaceConfig()
+    print(f"raplace benchmark on CPU core {core}; scan {source} {scan[0].shape}")
+    rows, ours = descriptor_rows(scan, cfg, args.repeats)
+    for n_keyframes in args.keyframes:
+        rows += query_benchmark(ours, n_keyframes, cfg.retrieval, args.repeats)
+    rows += scancontext_and_pose_rows(scan, cfg, args.repeats, args.keyframes[0])
     if args.write_doc:
         from benchmark_doc import markdown_table, update_section
 

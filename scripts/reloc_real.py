@@ -14,7 +14,11 @@ between two map scans, a few metres from them. Variants:
 - "map with a gap": the map keyframes of `GAP_SCANS` removed (a street the map never saw): the
   queries there must be reported lost, not extrapolated, and placed again after it;
 - "sparse map": one keyframe in three (`SPARSE_EVERY`), queries farther from their keyframes and
-  registrations weaker.
+  registrations weaker;
+- "map of the first half": only the keyframes of the drive's first half; the drive does not
+  come back, so the second half's queries have no right place in the map: every one placed there
+  is a wrong claim ("placed off the route"), and their `quality` is what a user's threshold
+  must reject.
 
 Each localised position is taken into the GNSS frame through the map's own alignment to GNSS
 (`Map.gt_alignment`: the map run's trajectory aligned to its GNSS once), never re-aligned to the
@@ -25,7 +29,11 @@ of all queries, the number placed more than 10 m off and the number placed while
 10 m from the route (extrapolated past the map); the median yaw error (against the GNSS
 heading, less the expected pi when turned); relocalisations; and how well the
 CSV's `quality` and `sigma_m` columns separate good from bad placements (the loosest threshold
-that keeps only scans within 5 m, and how many scans it keeps).
+that keeps only scans within 5 m, and how many scans it keeps). Below the table, over all
+variants, the single-scan hypotheses of global relocalisation (each candidate keyframe that
+verified, before the chain of agreeing hypotheses decides): how many were wrong (more than 10 m
+from GNSS) and right (within 5 m), and their registration quality, the value a fix's `quality`
+column carries.
 
 Limits: map and queries come from one pass, so they share the lane, the moment (the same
 parked and moving vehicles) and the weather; a real return pass adds a lateral offset of a lane
@@ -41,6 +49,7 @@ import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from bench_real import real_data_parser
@@ -51,8 +60,10 @@ from pr_real import gnss_positions
 from radar_slam.datasets import RadarFrame
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.stride import ScanSelection
-from radar_slam.maps import Localization, Localizer, Map, build_map
+from radar_slam.loops.records import KeyScan
+from radar_slam.maps import Localization, Map, build_map
 from radar_slam.maps.evaluate import map_route_gt
+from radar_slam.maps.localizer import Localizer
 from radar_slam.pipeline import Pipeline, PipelineConfig, load_config
 from raplace import compose, wrap_angle
 
@@ -111,6 +122,22 @@ class Scored:
     relocalisations: int
     global_attempts: int
     scans_per_s: float
+    hypothesis_error_m: FloatArray
+    hypothesis_quality: FloatArray
+
+
+class RecordingLocalizer(Localizer):
+    """A `Localizer` that keeps every single-scan hypothesis of global relocalisation (a
+    verified candidate keyframe) as (its pose T_map_scan, quality)."""
+
+    def __init__(self, m: Map, config: PipelineConfig) -> None:
+        super().__init__(m, config)
+        self.hypotheses: list[tuple[FloatArray, float]] = []
+
+    def _verified(self, query: KeyScan, keyframes: list[int]) -> list[Any]:
+        fixes = super()._verified(query, keyframes)
+        self.hypotheses += [(f.pose, f.quality) for f in fixes]
+        return fixes
 
 
 def make_map(sequence: RadarSequence, stride: int, config: PipelineConfig) -> Map:
@@ -149,16 +176,22 @@ def localize(variant: Variant, gnss: FloatArray, config: PipelineConfig) -> Scor
     assert m.gt_alignment is not None
     fixes: list[Localization] = []
     seconds, relocalisations, attempts = 0.0, 0, 0
-    localizer = Localizer(m, config)
+    localizer = RecordingLocalizer(m, config)
+    hypotheses: list[tuple[int, FloatArray, float]] = []
     for n in range(len(variant.queries)):
         if variant.restart_every and n and n % variant.restart_every == 0:
             relocalisations += localizer.relocalisations
             attempts += localizer.global_attempts
-            localizer = Localizer(m, config)
+            localizer = RecordingLocalizer(m, config)
         frame = variant.queries[n]
         start = time.perf_counter()
         fixes.append(localizer.localize(frame))
         seconds += time.perf_counter() - start
+        hypotheses += [(n, pose, quality) for pose, quality in localizer.hypotheses]
+        localizer.hypotheses = []
+    hypothesis_error = np.array(
+        [np.hypot(*(compose(m.gt_alignment, pose)[:2] - gnss[n, :2])) for n, pose, _ in hypotheses]
+    )
     error, yaw_error = np.full(len(fixes), np.nan), np.full(len(fixes), np.nan)
     for n, f in enumerate(fixes):
         if f.localised:
@@ -180,6 +213,8 @@ def localize(variant: Variant, gnss: FloatArray, config: PipelineConfig) -> Scor
         relocalisations + localizer.relocalisations,
         attempts + localizer.global_attempts,
         len(fixes) / seconds,
+        hypothesis_error,
+        np.array([quality for _, _, quality in hypotheses]),
     )
 
 
@@ -196,6 +231,26 @@ def separation(values: FloatArray, good: NDArray[np.bool_], higher_is_better: bo
     threshold = values[order[kept - 1]]
     sign = ">=" if higher_is_better else "<="
     return f"{sign} {threshold:.3g} keeps {kept} of {int(good.sum())}"
+
+
+def hypothesis_line(scored: list[Scored]) -> str:
+    """The wrong and right single-scan hypotheses of all variants and their quality."""
+    error = np.concatenate([s.hypothesis_error_m for s in scored])
+    quality = np.concatenate([s.hypothesis_quality for s in scored])
+    has_gnss = np.isfinite(error)
+    wrong, right = has_gnss & (error > WRONG_M), has_gnss & (error <= GOOD_M)
+
+    def spread(values: FloatArray) -> str:
+        if not len(values):
+            return "none"
+        low, mid, high = np.percentile(values, [0, 50, 100])
+        return f"{len(values)}, quality min / median / max {low:.1f} / {mid:.1f} / {high:.1f}"
+
+    return (
+        f"Single-scan hypotheses of global relocalisation, all variants ({int(has_gnss.sum())} "
+        f"with GNSS): wrong (more than {WRONG_M:.0f} m off) {spread(quality[wrong])}; right "
+        f"(within {GOOD_M:.0f} m) {spread(quality[right])}."
+    )
 
 
 def row(s: Scored) -> list[str]:
@@ -246,7 +301,9 @@ def variants(sequence: RadarSequence, m: Map, stride: int) -> tuple[list[Variant
     """The variants of the module docstring and the drive's indices of the queries."""
     picks = np.arange(stride // 2, len(sequence), stride)
     queries = ScanSelection(sequence, picks, sequence.name + "_queries")
-    gapped = with_gap(m, np.arange(0, len(sequence), stride), GAP_SCANS)
+    map_scans = np.arange(0, len(sequence), stride)
+    gapped = with_gap(m, map_scans, GAP_SCANS)
+    first_half = with_gap(m, map_scans, (len(sequence) // 2, len(sequence)))
     return [
         Variant("as driven", queries, m),
         Variant(
@@ -260,6 +317,7 @@ def variants(sequence: RadarSequence, m: Map, stride: int) -> tuple[list[Variant
             keyframe_subset(m, np.arange(len(m)) % SPARSE_EVERY == 0),
             route=m,
         ),
+        Variant("map of the first half", queries, first_half),
     ], picks
 
 
@@ -271,7 +329,7 @@ def run(root: Path, stride: int) -> str:
     config = load_config(sequence.family)
     m = make_map(sequence, stride, config)
     chosen, picks = variants(sequence, m, stride)
-    rows = [row(localize(v, gnss[picks], config)) for v in chosen]
+    scored = [localize(v, gnss[picks], config) for v in chosen]
     head = (
         f"RADIATE Edinburgh drive ({len(sequence)} scans): map from SLAM on every {stride}th scan "
         f"from 0 ({len(m)} keyframes), queries every {stride}th scan from {stride // 2}, "
@@ -282,7 +340,8 @@ def run(root: Path, stride: int) -> str:
         "keyframe (of the full map for the sparse one). The quality and sigma_m columns: the "
         "loosest threshold that keeps only scans within 5 m, and how many it keeps."
     )
-    return head + "\n\n" + markdown_table(HEADER, rows)
+    table = markdown_table(HEADER, [row(s) for s in scored])
+    return head + "\n\n" + table + "\n\n" + hypothesis_line(scored)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import Scan
+from odometry import PolarScan, Scan
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
@@ -171,6 +171,7 @@ class InterSessionQueries:
         self,
         scan_index: int,
         frame: Scan,
+        polar: PolarScan,
         twist: FloatArray | None,
         descriptor: NDArray[np.float32],
     ) -> None:
@@ -179,6 +180,7 @@ class InterSessionQueries:
         Args:
             scan_index: its index in the session.
             frame: the raw scan.
+            polar: its conditioned form (`odometry.preprocess_polar`, the run's settings).
             twist: (3,) its sweep twist (vx, vy [m/s], yaw rate [rad/s]), or None.
             descriptor: its RaPlace descriptor made by the run (`LOOP_RAPLACE`, as the map's).
         """
@@ -188,7 +190,7 @@ class InterSessionQueries:
             for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)
             if c.distance < cfg.max_descriptor_distance
         ]
-        query = KeyScan(scan_index, frame.timestamp_ns, frame, twist)
+        query = KeyScan(scan_index, frame.timestamp_ns, frame, twist, polar=polar)
         decisions = self.verified.setdefault(scan_index, [])
         for candidate in candidates:
             kf = int(candidate.key)

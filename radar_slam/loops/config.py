@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from raplace import RaPlaceConfig, checks
-from raplace.config import PreprocessConfig
 from raplace.config_io import replaced_by_constant, replaced_by_constants
 
 CHI2_3DOF_99 = 11.345
@@ -160,7 +159,12 @@ LOOP_POSE_PAD_FACTOR = 1
 `VerificationConfig.max_translation_m` (2 is about twice as slow)."""
 
 
-CONDITIONED = PreprocessConfig(ring_noise_removal=False, min_range_m=0.0)
+CONDITIONED = dataclasses.replace(
+    RaPlaceConfig().descriptor.preprocess,
+    ring_noise_removal=False,
+    spoke_removal=False,
+    min_range_m=0.0,
+)
 """RaPlace's own clean-up, off: the loop closer describes and images the odometry's conditioned
 scan (`radar_slam.loops.records.raplace_input`), which RaPlace averages to its cells and warps."""
 

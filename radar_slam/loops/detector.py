@@ -248,9 +248,8 @@ class LoopDetector:
             scan: the scan (any object with the `odometry.Scan` attributes).
             pose: (3,) odometry pose T_world_scan, or None (then for every scan).
             key: the scan's key in the loop constraints (default: number of scans fed before).
-            polar: the scan's conditioned form (`odometry.preprocess_polar` with the detector's
-                odometry settings: a run hands over the odometry's), or None: conditioned here
-                when the scan enters the database. It is described and verified from it.
+            polar: the scan's conditioned form with the detector's odometry settings (a run's
+                odometry's), else made here; the scan is described and verified from it.
 
         Raises:
             LoopClosureError: poses given for some scans only, a key reused, or time going back.
@@ -402,9 +401,8 @@ class LoopDetector:
         """Describe the held scan, enter it in the database and verify its candidates (when the
         throttle lets them through); the loop statuses that changed, by decision index."""
         if held.polar is None:
-            held = dataclasses.replace(
-                held, polar=preprocess_polar(held.scan, self.odometry.preprocess)
-            )
+            polar = preprocess_polar(held.scan, self.odometry.preprocess)
+            held = dataclasses.replace(held, polar=polar)
         entry, candidates = self._enter(held, twist, change)
         self.proposed += len(candidates)
         if held.pose is not None and not self.throttle.due(

@@ -157,10 +157,8 @@ class KeyScan:
 
 
 def raplace_input(polar: PolarScan) -> tuple[NDArray[np.float32], FloatArray, float]:
-    """A conditioned scan as RaPlace's extractors take it (`raplace.DescriptorExtractor`,
-    `raplace.PoseEstimator.image`, with `LOOP_RAPLACE`'s clean-up off): its image
-    (n_azimuths, n_bins), the azimuth of each row (n_azimuths,) [rad] CCW from +x, its bin
-    size [m]."""
+    """A conditioned scan as RaPlace's extractors (`LOOP_RAPLACE`) take it: its image (n_azimuths,
+    n_bins), the azimuth of each row (n_azimuths,) [rad] CCW from +x, its bin size [m]."""
     rows = np.arange(polar.n_azimuths, dtype=np.float64)
     return polar.image, polar.first_azimuth_rad + rows * polar.azimuth_step_rad, polar.bin_size_m
 

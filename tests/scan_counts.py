@@ -24,7 +24,6 @@ CONDITIONING_SITES = (
     "odometry.registration",
     "radar_slam.loops.detector",
     "radar_slam.loops.verification",
-    "radar_slam.maps.images",
     "radar_slam.maps.keyframes",
     "radar_slam.pipeline.slam",
 )

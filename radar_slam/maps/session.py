@@ -7,9 +7,9 @@ frame), made with `Pipeline(on_keyframe=queries)` where `queries` is the map's
 1. looks for inter-session loops: as the run makes each of its map keyframes (every
    `maps.keyframe_spacing_m` of its odometry path), `queries` looks the keyframe's RaPlace
    descriptor up among all map keyframes and verifies the best candidates as loops are
-   (`radar_slam.loops.GeometricVerifier`, the raw scan against the map keyframe's stored image),
-   so that no scan is read or described again after the run; after the run, the verified ones,
-   in scan order, pass the same pairwise consistency gate as intra-session loops
+   (`radar_slam.loops.GeometricVerifier`, the scan's conditioned form against the map keyframe's
+   stored image), so that no scan is read or described again after the run; after the run, the
+   verified ones, in scan order, pass the same pairwise consistency gate as intra-session loops
    (`ConsistencyGate` with the session's optimised path: two loops must close the cycle through
    the session's trajectory and the map's), so a loop is accepted only once another one agrees
    with it;

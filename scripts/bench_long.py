@@ -60,12 +60,13 @@ from bench_raplace import DATABASE_NOISE, median_ms, pin_to_one_core
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from odometry import OdometryConfig, prepare, register
+from odometry import OdometryConfig, prepare, preprocess_polar, register
 from radar_slam.datasets import open_sequence, registry
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.g2o import write_pose_graph
 from radar_slam.loops import LoopClosureConfig, LoopDetector, verification
 from radar_slam.loops.config import LOOP_RAPLACE
+from radar_slam.loops.records import raplace_input
 from radar_slam.loops.verification import GeometricVerifier
 from radar_slam.pipeline import MEMORY_BUDGET_BYTES, Pipeline, Progress, Results, load_config
 from radar_slam.sim.family import is_complete
@@ -166,7 +167,8 @@ def probe_query_ms(detector: object, sequence: RadarSequence, index: int) -> flo
     if not isinstance(recognizer, PlaceRecognizer):
         return None
     scan = sequence[index]
-    query = detector.describe(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
+    polar = preprocess_polar(scan, detector.odometry.preprocess)
+    query = detector.describe(*raplace_input(polar))
     time_s = int(scan.timestamp_ns) / NS_PER_S
     k = detector.config.candidates
     return median_ms(lambda: recognizer.query(query, k, time_s), PROBE_QUERIES)
@@ -246,7 +248,9 @@ class LoopMeter:
             pose = verifier.pose_estimator
             for part in ("image", "spectrum", "estimate_spectra"):
                 setattr(pose, part, self.wrap(f"sinogram {part}", getattr(pose, part)))
-            verification.prepare = self.wrap("refinement prepare", verification.prepare)
+            verification.preprocess_polar = self.wrap(
+                "record conditioning", verification.preprocess_polar
+            )
             verification.register = self.wrap("refinement register", verification.register)
         counted = _CountedVerifier(verifier, self.wrap("verification", verifier))
         refine = getattr(verifier, "refine", None)
@@ -413,10 +417,10 @@ def query_probe(
     `keyframes` entries (`grown_database`); the query is the last scan, which revisits a place
     driven before."""
     describe = DescriptorExtractor(LOOP_RAPLACE.descriptor)
+    preprocess = load_config(sequence.family).odometry.preprocess
 
     def descriptor(index: int) -> np.ndarray:
-        scan = sequence[index]
-        return describe(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
+        return describe(*raplace_input(preprocess_polar(sequence[index], preprocess)))
 
     sources = np.linspace(0, frames - 2, min(PROBE_SOURCE_SCANS, frames - 1)).astype(int)
     real = np.stack([descriptor(int(n)) for n in sources])

@@ -1,5 +1,6 @@
-"""Counters of what a run does to its scans: reads of the sequence, conditionings,
-descriptors, pose images and scan records read back (`counting`)."""
+"""Counters of what a run does to its scans: reads of the sequence, conditionings, RaPlace
+descriptors and pose images (keyed by the conditioned image they were made of), and scan records
+read back (`counting`)."""
 
 from __future__ import annotations
 
@@ -7,12 +8,12 @@ import hashlib
 from collections import Counter
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from unittest import mock
 
 import numpy as np
 
-from odometry import preprocess_polar
+from odometry import PolarScan, PreprocessConfig, Scan, preprocess_polar
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.maps.images import PSEUDO_SENSOR
 from radar_slam.maps.keyframes import KeyframeRecorder
@@ -21,16 +22,17 @@ from raplace import DescriptorExtractor, PoseEstimator
 CONDITIONING_SITES = (
     "odometry.odometry",
     "odometry.registration",
-    "radar_slam.maps.images",
+    "radar_slam.loops.detector",
+    "radar_slam.loops.verification",
     "radar_slam.maps.keyframes",
     "radar_slam.pipeline.slam",
 )
 """The modules that call the odometry's conditioning (`preprocess_polar`) on a scan."""
 
 
-def content_key(polar: np.ndarray) -> str:
-    """A scan's polar image as a key (the same image: the same key)."""
-    return hashlib.sha1(np.ascontiguousarray(polar).tobytes()).hexdigest()
+def content_key(image: np.ndarray) -> str:
+    """An image's content as a key (the same pixels: the same key)."""
+    return hashlib.sha1(np.ascontiguousarray(image).tobytes()).hexdigest()
 
 
 @dataclass
@@ -41,10 +43,10 @@ class Counts:
         decodes: scan index -> reads of the sequence.
         conditioned: scan timestamp [ns] -> odometry conditionings of the scan itself.
         record_conditioned: conditionings of database scans remade from their records.
-        described: polar image -> RaPlace descriptors made of it.
-        pose_images: polar image of a scan -> RaPlace pose images made of it.
+        described: image -> RaPlace descriptors made of it.
+        pose_images: image -> RaPlace pose images made of it.
+        scan_images, record_images: the conditioned images made of the scans, of the records.
         records_read: database scans taken back from their records for verification.
-        record_pose_images: RaPlace pose images made of those.
     """
 
     decodes: Counter[int]
@@ -53,7 +55,13 @@ class Counts:
     described: Counter[str]
     pose_images: Counter[str]
     records_read: int
-    record_pose_images: int
+    scan_images: set[str] = field(default_factory=set)
+    record_images: set[str] = field(default_factory=set)
+
+    @property
+    def record_pose_images(self) -> int:
+        """RaPlace pose images made of the records read back."""
+        return sum(n for key, n in self.pose_images.items() if key in self.record_images)
 
 
 @contextmanager
@@ -61,14 +69,18 @@ def counting(sequence: RadarSequence) -> Iterator[Counts]:
     """Count, while in the block, the reads of `sequence`'s scans, the odometry's conditionings,
     the RaPlace descriptors and pose images, and the records read back."""
     kind = type(sequence)
+    conditionings: list[tuple[Scan, PolarScan]] = []
+
+    def condition(scan: Scan, cfg: PreprocessConfig) -> PolarScan:
+        conditionings.append((scan, preprocess_polar(scan, cfg)))
+        return conditionings[-1][1]
+
     with ExitStack() as stack:
         read = stack.enter_context(
             mock.patch.object(kind, "__getitem__", autospec=True, side_effect=kind.__getitem__)
         )
-        conditionings = [
-            stack.enter_context(mock.patch(f"{site}.preprocess_polar", wraps=preprocess_polar))
-            for site in CONDITIONING_SITES
-        ]
+        for site in CONDITIONING_SITES:
+            stack.enter_context(mock.patch(f"{site}.preprocess_polar", condition))
         describe = stack.enter_context(
             mock.patch.object(
                 DescriptorExtractor,
@@ -90,15 +102,17 @@ def counting(sequence: RadarSequence) -> Iterator[Counts]:
             return records[-1]
 
         stack.enter_context(mock.patch.object(KeyframeRecorder, "scan", read_record))
-        counts = Counts(Counter(), Counter(), 0, Counter(), Counter(), 0, 0)
+        counts = Counts(Counter(), Counter(), 0, Counter(), Counter(), 0)
         yield counts
         counts.decodes.update(int(call.args[1]) for call in read.call_args_list)
-        scans = [call.args[0] for m in conditionings for call in m.call_args_list]
-        counts.conditioned.update(int(s.timestamp_ns) for s in scans if s.sensor != PSEUDO_SENSOR)
-        counts.record_conditioned = sum(s.sensor == PSEUDO_SENSOR for s in scans)
+        for scan, polar in conditionings:
+            from_record = scan.sensor == PSEUDO_SENSOR
+            images = counts.record_images if from_record else counts.scan_images
+            images.add(content_key(polar.image))
+            if from_record:
+                counts.record_conditioned += 1
+            else:
+                counts.conditioned[int(scan.timestamp_ns)] += 1
         counts.described.update(content_key(call.args[1]) for call in describe.call_args_list)
-        from_records = {content_key(frame.polar) for frame in records}
-        imaged = [content_key(call.args[1]) for call in pose.call_args_list]
-        counts.pose_images.update(key for key in imaged if key not in from_records)
-        counts.record_pose_images = sum(key in from_records for key in imaged)
+        counts.pose_images.update(content_key(call.args[1]) for call in pose.call_args_list)
         counts.records_read = len(records)

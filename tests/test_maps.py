@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from odometry import OdometryConfig
+from odometry import OdometryConfig, preprocess_polar
 from radar_slam.cli import main
 from radar_slam.datasets import open_sequence
 from radar_slam.datasets.frame import RadarSequence
@@ -157,7 +157,8 @@ def test_keyframe_image_verifies_like_the_scan(tiny_loop: RadarSequence) -> None
     query = 150  # on the revisit: its nearest scan of the first lap is the match
     match = int(np.argmin(np.hypot(*(gt[:80, :2] - gt[query, :2]).T)))
     assert 0.5 < np.hypot(*(gt[query, :2] - gt[match, :2])) < 5.0
-    png, _ = imager.encode(imager.image(tiny_loop[match], None))
+    polar = preprocess_polar(tiny_loop[match], imager.odometry.preprocess)
+    png, _ = imager.encode(imager.render(polar, None))
     pseudo = imager.pseudo_scan(png, tiny_loop[match].timestamp_ns)
     result = verifier(
         KeyScan(query, pseudo.timestamp_ns, tiny_loop[query]),

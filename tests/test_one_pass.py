@@ -1,4 +1,5 @@
-"""One pass per scan: a SLAM run decodes each scan once, conditions it once and describes it
+"""One pass per scan: a SLAM run decodes each scan once, conditions it once (the odometry's
+conditioning, which the RaPlace descriptor and pose image are made of too) and describes it
 once (joined to a map with `radar-slam run --map` too); the loop verifier takes a database scan
 back from its record (in `radar-slam loops` too), and what a run keeps per scan, on a
 10,000-scan drive, stays within the memory budget (`GROWTH_BUDGET_BYTES`). (Config files and
@@ -68,15 +69,22 @@ def test_database_scans_are_verified_from_their_records(counted_run: CountedRun)
     assert metrics.loops_accepted_true == metrics.loops_accepted
     counts = counted_run.counts
     assert counts.records_read >= metrics.loops_proposed
-    # each record read back is conditioned for its registration (the scan itself never again),
-    # and imaged for the sinogram pose unless the loop was checked from a prediction
+    # each record read back is conditioned once (the scan itself never again), and that
+    # conditioned form imaged for the sinogram pose unless the loop was checked from a prediction
     assert counts.record_conditioned == counts.records_read
     assert 0 < counts.record_pose_images <= counts.records_read
 
 
 def test_each_scan_is_conditioned_once(tiny_loop: RadarSequence, counted_run: CountedRun) -> None:
+    """One conditioning per scan, and every RaPlace descriptor and pose image is made of a
+    conditioned image (a scan's or a record's): RaPlace conditions nothing of its own."""
+    counts = counted_run.counts
     stamps = np.asarray(tiny_loop.timestamps_ns)[: counted_run.results.metrics.frames]
-    assert counted_run.counts.conditioned == Counter(int(t) for t in stamps)
+    assert counts.conditioned == Counter(int(t) for t in stamps)
+    assert len(counts.scan_images) == len(stamps)
+    assert set(counts.described) <= counts.scan_images
+    assert set(counts.pose_images) <= counts.scan_images | counts.record_images
+    assert set(counts.pose_images) & counts.scan_images  # the queries' own
 
 
 def test_each_scan_is_described_once(counted_run: CountedRun) -> None:
@@ -89,7 +97,7 @@ def test_each_scan_is_described_once(counted_run: CountedRun) -> None:
     assert recorded is not None
     taken = pipeline.keyframes.descriptors_taken  # type: ignore[attr-defined]
     assert taken == len(recorded.records)
-    assert max(counts.pose_images.values()) == 1
+    assert max(n for key, n in counts.pose_images.items() if key in counts.scan_images) == 1
 
 
 VERTEX_BASE = 1000

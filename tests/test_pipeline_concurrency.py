@@ -57,10 +57,12 @@ class FaultySequence:
 class FaultyDetector(LoopDetector):
     """A loop detector that fails at scan `BAD_SCAN`."""
 
-    def add(self, scan: Scan, pose: Any = None, key: int | None = None) -> list[LoopConstraint]:
+    def add(
+        self, scan: Scan, pose: Any = None, key: int | None = None, polar: Any = None
+    ) -> list[LoopConstraint]:
         if key == BAD_SCAN:
             raise LoopClosureError(f"scan {key}: pose must be 3 finite numbers")
-        return super().add(scan, pose, key)
+        return super().add(scan, pose, key, polar)
 
 
 @pytest.fixture(scope="module")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from odometry import PolarScan, Scan
 from odometry.odometry import Odometry
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.loops import NullLoopDetector
@@ -24,9 +25,14 @@ class PoseRecorder(NullLoopDetector):
         self.finished_after = -1
 
     def add(
-        self, scan: object, pose: ArrayLike | None = None, key: int | None = None
+        self,
+        scan: Scan,
+        pose: ArrayLike | None = None,
+        key: int | None = None,
+        polar: PolarScan | None = None,
     ) -> list[LoopConstraint]:
         assert key is not None and pose is not None and key not in self.poses
+        assert polar is not None and polar.timestamp_ns == scan.timestamp_ns
         self.poses[key] = np.asarray(pose, dtype=np.float64)
         return []
 

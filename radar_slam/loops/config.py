@@ -159,18 +159,33 @@ LOOP_POSE_PAD_FACTOR = 1
 `VerificationConfig.max_translation_m` (2 is about twice as slow)."""
 
 
+CONDITIONED = dataclasses.replace(
+    RaPlaceConfig().descriptor.preprocess,
+    ring_noise_removal=False,
+    spoke_removal=False,
+    min_range_m=0.0,
+)
+"""RaPlace's own clean-up, off: the loop closer describes and images the odometry's conditioned
+scan (`radar_slam.loops.records.raplace_input`), which RaPlace averages to its cells and warps."""
+
+
 def _raplace_defaults() -> RaPlaceConfig:
     base = RaPlaceConfig()
     pose = dataclasses.replace(
-        base.pose, n_theta=LOOP_POSE_N_THETA, pad_factor=LOOP_POSE_PAD_FACTOR
+        base.pose,
+        preprocess=CONDITIONED,
+        n_theta=LOOP_POSE_N_THETA,
+        pad_factor=LOOP_POSE_PAD_FACTOR,
     )
-    return dataclasses.replace(base, pose=pose)
+    descriptor = dataclasses.replace(base.descriptor, preprocess=CONDITIONED)
+    return dataclasses.replace(base, descriptor=descriptor, pose=pose)
 
 
 LOOP_RAPLACE = _raplace_defaults()
 """RaPlace settings of the loop closer and of map localisation: descriptor, database (exclusion
 of recent entries) and sinogram pose. RaPlace's own defaults (measured on MulRan and Oxford,
-`raplace.config`), with the verifier's cheaper pose spectra above. RaPlace's own
+`raplace.config`) on the odometry's conditioned scans (`CONDITIONED`), with the verifier's
+cheaper pose spectra above. RaPlace's own
 `retrieval.loop_threshold` (for precision-recall) is not used here: `max_descriptor_distance`
 decides. A map keeps the descriptor settings it was made with (`radar_slam.maps`)."""
 

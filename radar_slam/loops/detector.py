@@ -29,7 +29,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import OdometryConfig, Scan, Velocity
+from odometry import OdometryConfig, PolarScan, Scan, Velocity, preprocess_polar
 from radar_slam.loops.config import LOOP_RAPLACE, LoopClosureConfig
 from radar_slam.loops.consistency import ConsistencyGate
 from radar_slam.loops.recent import HeldBackDatabase, held_back_retrieval, within_reach
@@ -41,6 +41,7 @@ from radar_slam.loops.records import (
     LoopStatus,
     Verification,
     VerifiedLoop,
+    raplace_input,
 )
 from radar_slam.loops.sweep_twist import (
     mean_acquisition_time_ns,
@@ -72,7 +73,11 @@ class LoopDetectorProtocol(Protocol):
     """What the pipeline needs from a loop detector (`LoopDetector` or `NullLoopDetector`)."""
 
     def add(
-        self, scan: Scan, pose: ArrayLike | None = None, key: int | None = None
+        self,
+        scan: Scan,
+        pose: ArrayLike | None = None,
+        key: int | None = None,
+        polar: PolarScan | None = None,
     ) -> list[LoopConstraint]: ...
 
     def finish(self) -> list[LoopConstraint]: ...
@@ -93,7 +98,7 @@ class _Held:
     """The last scan fed, held until the next one is in (its velocity needs the step after it).
 
     Attributes:
-        scan, pose, key: as given to `LoopDetector.add` (pose (3,) or None).
+        scan, pose, key, polar: as given to `LoopDetector.add` (pose (3,) or None).
         before: the velocity of the odometry step into this scan (None: first scan, no poses,
             or a step beyond the vehicle's limits).
         path_m: odometry path length up to this scan [m].
@@ -106,6 +111,7 @@ class _Held:
     before: Velocity | None
     path_m: float
     segment: int
+    polar: PolarScan | None
 
 
 @dataclass
@@ -230,7 +236,11 @@ class LoopDetector:
 
     # -- the per-scan step --------------------------------------------------------------------
     def add(
-        self, scan: Scan, pose: ArrayLike | None = None, key: int | None = None
+        self,
+        scan: Scan,
+        pose: ArrayLike | None = None,
+        key: int | None = None,
+        polar: PolarScan | None = None,
     ) -> list[LoopConstraint]:
         """Feed the next scan (time order); returns the loops accepted by this call.
 
@@ -238,6 +248,8 @@ class LoopDetector:
             scan: the scan (any object with the `odometry.Scan` attributes).
             pose: (3,) odometry pose T_world_scan, or None (then for every scan).
             key: the scan's key in the loop constraints (default: number of scans fed before).
+            polar: the scan's conditioned form with the detector's odometry settings (a run's
+                odometry's), else made here; the scan is described and verified from it.
 
         Raises:
             LoopClosureError: poses given for some scans only, a key reused, or time going back.
@@ -247,7 +259,7 @@ class LoopDetector:
         pose_arr = self._check(scan, pose, key)
         before = self._advance(scan, pose_arr, key)
         accepted = self._handle_held(after=before)
-        track.held = _Held(scan, pose_arr, key, before, track.path_m, track.segment)
+        track.held = _Held(scan, pose_arr, key, before, track.path_m, track.segment, polar)
         if pose_arr is None:  # no velocity to wait for
             accepted += self._handle_held(after=None)
         return accepted
@@ -388,13 +400,18 @@ class LoopDetector:
     ) -> dict[int, LoopStatus]:
         """Describe the held scan, enter it in the database and verify its candidates (when the
         throttle lets them through); the loop statuses that changed, by decision index."""
+        if held.polar is None:
+            polar = preprocess_polar(held.scan, self.odometry.preprocess)
+            held = dataclasses.replace(held, polar=polar)
         entry, candidates = self._enter(held, twist, change)
         self.proposed += len(candidates)
         if held.pose is not None and not self.throttle.due(
             entry.path_m, [self._entries[c.key].path_m for c in candidates]
         ):
             return {}
-        query = KeyScan(entry.key, entry.timestamp_ns, held.scan, twist, change, span_s)
+        query = KeyScan(
+            entry.key, entry.timestamp_ns, held.scan, twist, change, span_s, polar=held.polar
+        )
         return self._verify_candidates(entry, query, candidates)
 
     def _enter(
@@ -405,7 +422,8 @@ class LoopDetector:
         cfg = self.config
         scan, pose, key = held.scan, held.pose, held.key
         time_s = int(scan.timestamp_ns) / NS_PER_S
-        descriptor = self.describe(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
+        assert held.polar is not None
+        descriptor = self.describe(*raplace_input(held.polar))
         if self.on_describe is not None:
             self.on_describe(key, descriptor)
         path_m = held.path_m if pose is not None else None
@@ -561,7 +579,11 @@ class NullLoopDetector:
         return 0, 0
 
     def add(
-        self, scan: Scan, pose: ArrayLike | None = None, key: int | None = None
+        self,
+        scan: Scan,
+        pose: ArrayLike | None = None,
+        key: int | None = None,
+        polar: PolarScan | None = None,
     ) -> list[LoopConstraint]:
         return []
 

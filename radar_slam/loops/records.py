@@ -12,7 +12,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from odometry import Scan
+from odometry import PolarScan, Scan
 from radar_slam.errors import RadarSlamError
 
 FloatArray = NDArray[np.float64]
@@ -142,6 +142,8 @@ class KeyScan:
         sweep_s: how long the scan's sweep lasted [s] when `scan` has no azimuth times but
             stands for one that had (a scan's record: its image already de-skewed), or None;
             the loop covariance's de-skew terms grow with it.
+        polar: `scan` conditioned with the verifier's odometry settings (`odometry.Odometry`'s
+            own, in a run), or None: the verifier conditions it.
     """
 
     key: int
@@ -151,6 +153,14 @@ class KeyScan:
     twist_change: FloatArray | None = None
     twist_span_s: float | None = None
     sweep_s: float | None = None
+    polar: PolarScan | None = None
+
+
+def raplace_input(polar: PolarScan) -> tuple[NDArray[np.float32], FloatArray, float]:
+    """A conditioned scan as RaPlace's extractors (`LOOP_RAPLACE`) take it: its image (n_azimuths,
+    n_bins), the azimuth of each row (n_azimuths,) [rad] CCW from +x, its bin size [m]."""
+    rows = np.arange(polar.n_azimuths, dtype=np.float64)
+    return polar.image, polar.first_azimuth_rad + rows * polar.azimuth_step_rad, polar.bin_size_m
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ conditioning, cells and de-skew as the odometry).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Protocol
 
 import numpy as np
@@ -25,16 +26,14 @@ from odometry import (
     OdometryConfig,
     PolarScan,
     PreparedScan,
-    PreprocessConfig,
-    RadarFrame,
     Scan,
     motion_from_twist,
-    prepare,
+    preprocess_polar,
     register,
     searched_registration,
 )
 from radar_slam.loops.config import LOOP_RAPLACE, LoopClosureConfig, LoopCovarianceConfig
-from radar_slam.loops.records import KeyScan, Verification
+from radar_slam.loops.records import KeyScan, Verification, raplace_input
 from raplace import (
     NS_PER_S,
     PoseEstimator,
@@ -47,8 +46,6 @@ from raplace import (
 )
 
 FloatArray = NDArray[np.float64]
-OFFERS_KEPT = 2
-"""Offered conditioned scans kept: the detector queries scan k when scan k + 1 is offered."""
 MIN_SINOGRAM_QUALITY = 0.25
 """Minimum normalised correlation of the two images aligned by the sinogram estimate
 (`RelativePose.quality`, about 1 for the same place, 0 unrelated)."""
@@ -154,21 +151,10 @@ def _half_sweep_s(key_scan: KeyScan) -> float | None:
     return None if sweep is None else 0.5 * sweep
 
 
-def turned(scan: Scan, turn_rad: float) -> RadarFrame:
-    """`scan` seen from a frame whose x axis is turned by -`turn_rad` from the scan's: a point at
-    azimuth a in the scan's frame lies at a + turn_rad in the new one (azimuths offset)."""
-    return RadarFrame(
-        timestamp_ns=int(scan.timestamp_ns),
-        polar=scan.polar,
-        azimuths_rad=np.asarray(scan.azimuths_rad, dtype=np.float64) + turn_rad,
-        range_resolution_m=float(scan.range_resolution_m),
-        sensor=scan.sensor,
-        azimuth_times_ns=scan.azimuth_times_ns,
-    )
-
-
 def turned_twist(twist: FloatArray | None, turn_rad: float) -> FloatArray | None:
-    """A body twist (vx, vy, yaw rate) expressed in a frame turned like `turned`."""
+    """A body twist (vx, vy, yaw rate) expressed in a frame whose x axis is turned by
+    -`turn_rad` from the scan's (a point at azimuth a in the scan's frame lies at a + turn_rad
+    in the new one)."""
     if twist is None:
         return None
     c, s = np.cos(turn_rad), np.sin(turn_rad)
@@ -214,20 +200,19 @@ class Verifier(Protocol):
 class GeometricVerifier:
     """Sinogram relative pose, refined by phase correlation (see the module docstring).
 
-    Caches the current query's pose spectrum and prepared scan, so verifying several candidates
-    of one query conditions the query scan once. A database scan's pose spectrum is made each
-    time it is a candidate (from its record in a run; keeping them saved nothing measurable on
-    `synthetic/long`).
+    Caches the current query's pose spectrum and prepared scan for its several candidates. A
+    database scan's pose spectrum is made each time it is a candidate (from its record in a run;
+    keeping them saved nothing measurable on `synthetic/long`).
 
     Args:
         cfg: loop-closing settings (its `verification` section).
         odometry: the run's odometry settings, which the phase-correlation refinement uses
             (None: the defaults).
 
-    A caller that has already conditioned a scan for registration (the pipeline's odometry)
-    hands it over with `offer` before the detector sees the scan; the query is then not
-    conditioned again (see `offer`). The last `OFFERS_KEPT` offered scans are kept (the detector
-    queries a scan once the next one is in).
+    A scan's one conditioned form (`KeyScan.polar`, the odometry's in a run; else made here) makes
+    its sinogram pose image and its registration, de-skewed with its own twist (the odometry's
+    images, de-skewed with the odometry's velocity, moved the SLAM ATE of `synthetic/loop` from
+    0.130 to 0.138 m).
     """
 
     def __init__(self, cfg: LoopClosureConfig, odometry: OdometryConfig | None = None) -> None:
@@ -238,61 +223,38 @@ class GeometricVerifier:
         self._query_spectrum: PoseSpectrum | None = None
         self._query_prepared: PreparedScan | None = None
         self._prepared_key: int | None = None
-        self._offered: dict[int, tuple[PolarScan, PreprocessConfig]] = {}
-        self.reused = 0
-        """Queries whose offered conditioned scan was used (a count, for benchmarks)."""
 
-    def offer(self, key: int, prepared: PreparedScan) -> None:
-        """Hand over scan `key`'s conditioned form (`odometry.Odometry.prepared`), to be used if
-        that scan is verified as a query (the last `OFFERS_KEPT` offers are kept).
+    def polar(self, scan: KeyScan) -> PolarScan:
+        """The conditioned form of `scan`: its `KeyScan.polar`, else made here."""
+        if scan.polar is not None:
+            return scan.polar
+        return preprocess_polar(scan.scan, self.odometry.preprocess)
 
-        Made with the verifier's conditioning settings (`odometry.preprocess`), its
-        conditioned polar scan is reused, de-skewed with the query's own velocity
-        (`KeyScan.twist`), so the verification is exactly that of conditioning the scan again;
-        otherwise it is ignored. (The odometry's images and spectra are not reused: they are
-        de-skewed with the odometry's velocity, which moved loops by millimetres and the SLAM ATE
-        of `synthetic/loop` from 0.130 to 0.138 m.) Only the polar scan is kept from the offer.
-        """
-        self._offered[int(key)] = (prepared.polar, prepared.cfg.preprocess)
-        while len(self._offered) > OFFERS_KEPT:
-            del self._offered[min(self._offered)]
+    def prepared(self, scan: KeyScan, turn_rad: float = 0.0) -> PreparedScan:
+        """The registration input of `scan` seen from a frame turned by -`turn_rad` (its
+        azimuths offset by `turn_rad`, as `turned_twist`), de-skewed with its twist when the
+        odometry de-skews."""
+        polar = self.polar(scan)
+        if turn_rad:
+            polar = dataclasses.replace(polar, first_azimuth_rad=polar.first_azimuth_rad + turn_rad)
+        twist = turned_twist(scan.twist, turn_rad) if self.odometry.deskew else None
+        return PreparedScan(polar, twist, self.odometry)
 
-    def _spectrum(self, scan: Scan) -> PoseSpectrum:
-        image = self.pose_estimator.image(scan.polar, scan.azimuths_rad, scan.range_resolution_m)
+    def _spectrum(self, scan: KeyScan) -> PoseSpectrum:
+        image = self.pose_estimator.image(*raplace_input(self.polar(scan)))
         return self.pose_estimator.spectrum(image)
 
     def _query(self, query: KeyScan) -> PoseSpectrum:
         if self._query_key != query.key or self._query_spectrum is None:
             self._query_key = query.key
-            self._query_spectrum = self._spectrum(query.scan)
+            self._query_spectrum = self._spectrum(query)
         return self._query_spectrum
 
     def _prepared_query(self, query: KeyScan) -> PreparedScan:
-        if self._prepared_key != query.key:  # `refine` may come without `_query`
-            self._prepared_key = query.key
-            self._query_prepared = None
-        if self._query_prepared is None:
-            self._query_prepared = self._from_offer(query)
-        if self._query_prepared is None:
-            self._query_prepared = prepare(query.scan, self.odometry, query.twist)
+        if self._prepared_key != query.key or self._query_prepared is None:
+            self._prepared_key = query.key  # `refine` may come without `_query`
+            self._query_prepared = self.prepared(query)
         return self._query_prepared
-
-    def _from_offer(self, query: KeyScan) -> PreparedScan | None:
-        """The offered conditioned scan of `query` (see `offer`), or None."""
-        offered = self._offered.pop(int(query.key), None)
-        for key in [k for k in self._offered if k < query.key]:
-            del self._offered[key]  # offered for an earlier scan
-        if offered is None:
-            return None
-        polar, conditioning = offered
-        refinement = self.odometry
-        if polar.timestamp_ns != int(query.timestamp_ns):
-            return None  # offered for another scan with the same key
-        if conditioning != refinement.preprocess:
-            return None
-        self.reused += 1
-        twist = query.twist if refinement.deskew else None
-        return PreparedScan(polar, twist, refinement)
 
     def _searched_query(
         self,
@@ -311,8 +273,9 @@ class GeometricVerifier:
     def __call__(self, query: KeyScan, match: KeyScan) -> Verification:
         """Verify T_query_match; never raises for a bad match (the reason says why)."""
         vcfg = self.cfg.verification
+        match = dataclasses.replace(match, polar=self.polar(match))  # one conditioning
         rel: RelativePose = self.pose_estimator.estimate_spectra(
-            self._query(query), self._spectrum(match.scan)
+            self._query(query), self._spectrum(match)
         )
         sinogram = motion_compensated(rel.as_array(), query, match)
         nan33 = np.full((3, 3), np.nan)
@@ -361,7 +324,7 @@ class GeometricVerifier:
 
         # Phase correlation of the query and the match turned by the initial rotation.
         turn = float(initial[2])
-        aligned = prepare(turned(match.scan, turn), self.odometry, turned_twist(match.twist, turn))
+        aligned = self.prepared(match, turn)
         # A prediction also seeds the registration (its translation; the match is turned by its
         # rotation): one rotation and half-turn hypothesis instead of a global search.
         hint = None if np.isfinite(initial_quality) else np.array([initial[0], initial[1], 0.0])

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import OdometryConfig, PolarScan, RadarFrame, Scan, preprocess_polar, sample_scan
+from odometry import OdometryConfig, PolarScan, RadarFrame, sample_scan
 from radar_slam.errors import RadarSlamError
 from raplace import CartesianGrid, checks
 
@@ -102,18 +102,10 @@ class KeyframeImager:
         self._cols = (half - py / geometry.cell_m - 0.5).astype(np.float32)
         self._rows = (half - px / geometry.cell_m - 0.5).astype(np.float32)
 
-    def image(self, scan: Scan, twist: NDArray[np.float64] | None) -> NDArray[np.float32]:
-        """(size_px, size_px) float32 de-skewed Cartesian image of the conditioned scan.
-
-        Args:
-            scan: the polar scan.
-            twist: (3,) body velocity (vx, vy [m/s], yaw rate [rad/s]) for de-skewing, or None.
-        """
-        return self.render(preprocess_polar(scan, self.odometry.preprocess), twist)
-
     def render(self, polar: PolarScan, twist: NDArray[np.float64] | None) -> NDArray[np.float32]:
-        """(size_px, size_px) float32 de-skewed Cartesian image of a scan already conditioned
-        (`preprocess_polar` with this imager's odometry settings); `twist` as in `image`."""
+        """(size_px, size_px) float32 image of a conditioned scan (`preprocess_polar` with this
+        imager's odometry settings), de-skewed with `twist` (3,) (vx, vy [m/s], yaw rate
+        [rad/s]) or not (None)."""
         x, y = self._xy
         return sample_scan(polar, x, y, self._range, self._bearing, twist=twist)
 

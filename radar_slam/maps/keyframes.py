@@ -39,6 +39,7 @@ from odometry import (
     preprocess_polar,
 )
 from radar_slam.errors import RadarSlamError
+from radar_slam.loops.records import raplace_input
 from radar_slam.loops.sweep_twist import mean_acquisition_time_ns, step_velocity, sweep_twist
 from radar_slam.maps.config import MapsConfig
 from radar_slam.maps.images import KEYFRAME_IMAGE, ImageGeometry, KeyframeImager
@@ -49,10 +50,11 @@ log = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 DESCRIPTOR_DTYPE = np.float16
 """How a map stores its descriptors (half precision: half the bytes, ample for retrieval)."""
-KeyframeListener = Callable[[int, Scan, "FloatArray | None", NDArray[np.float32]], None]
-"""Takes a map keyframe as its record is made: its scan index, the raw scan, its sweep twist
-(3,) (vx, vy [m/s], yaw rate [rad/s]) or None, and its RaPlace descriptor (n_theta, n_freq)
-float32 (not to be changed)."""
+KeyframeListener = Callable[[int, Scan, PolarScan, "FloatArray | None", NDArray[np.float32]], None]
+"""Takes a map keyframe as its record is made: its scan index, the raw scan, its conditioned
+form (`preprocess_polar` with the run's odometry settings), its sweep twist (3,) (vx, vy [m/s],
+yaw rate [rad/s]) or None, and its RaPlace descriptor (n_theta, n_freq) float32 (neither to be
+changed)."""
 
 
 class KeyframeSpacing:
@@ -143,15 +145,15 @@ def describe_keyframe(
         frame: the raw scan.
         twist: (3,) its sweep twist (vx, vy [m/s], yaw rate [rad/s]), or None.
         imager: renders and encodes the image.
-        describe: the RaPlace descriptor extractor.
+        describe: the RaPlace descriptor extractor (of conditioned scans, `LOOP_RAPLACE`).
         polar: the scan's conditioned form (`preprocess_polar` with the imager's odometry
             settings), when already made.
-        descriptor: the scan's descriptor made by `describe`, when already made.
+        descriptor: the descriptor `describe` makes of `polar`, when already made.
     """
     if polar is None:
         polar = preprocess_polar(frame, imager.odometry.preprocess)
     if descriptor is None:
-        descriptor = describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
+        descriptor = describe(*raplace_input(polar))
     png, scale = imager.encode(imager.render(polar, twist))
     return KeyframeRecord(scan_index, np.asarray(descriptor, dtype=DESCRIPTOR_DTYPE), png, scale)
 
@@ -279,14 +281,17 @@ class KeyframeRecorder:
             self._keyframes.append(index)
         frame = held.frame
         twist = sweep_twist(held.before, after, mean_acquisition_time_ns(frame))
+        polar = held.polar
+        if polar is None:
+            polar = preprocess_polar(frame, self.odometry.preprocess)
         if descriptor is None:
-            descriptor = self.describe(frame.polar, frame.azimuths_rad, frame.range_resolution_m)
+            descriptor = self.describe(*raplace_input(polar))
         record = describe_keyframe(
-            index, frame, twist, self.imager, self.describe, held.polar, descriptor
+            index, frame, twist, self.imager, self.describe, polar, descriptor
         )
         self.records[index] = (record, int(frame.timestamp_ns))
         if held.keyframe and self.on_keyframe is not None:
-            self.on_keyframe(index, frame, twist, descriptor)
+            self.on_keyframe(index, frame, polar, twist, descriptor)
 
 
 class KeyframeStage(Protocol):

@@ -51,7 +51,6 @@ from odometry import (
     PreparedScan,
     RadarFrame,
     Scan,
-    prepare,
     register,
     twist_from_motion,
 )
@@ -65,7 +64,8 @@ from radar_slam.loops import (
     loop_covariance,
 )
 from radar_slam.loops.config import LOOP_RAPLACE
-from radar_slam.loops.verification import LOOP_COVARIANCE, turned
+from radar_slam.loops.records import raplace_input
+from radar_slam.loops.verification import LOOP_COVARIANCE
 from radar_slam.maps.format import Map, MapError
 from radar_slam.maps.images import ImageGeometry, KeyframeImager
 from raplace import (
@@ -304,7 +304,9 @@ class Localizer:
         """Register the next scan (time order) and place it in the map."""
         result = self.odometry.register(frame)
         self._advance(result)
-        query = KeyScan(result.index, result.timestamp_ns, frame, self._twist(result))
+        prepared = self.odometry.prepared
+        polar = None if prepared is None else prepared.polar
+        query = KeyScan(result.index, result.timestamp_ns, frame, self._twist(result), polar=polar)
         state = self.state
         status: Status = "lost"
         if state.tracking:
@@ -355,8 +357,7 @@ class Localizer:
             return False  # while a chain is open, every scan may add to it
         state.path_since_attempt_m = 0.0
         self.global_attempts += 1
-        s = query.scan
-        descriptor = self.describe(s.polar, s.azimuths_rad, s.range_resolution_m)
+        descriptor = self.describe(*raplace_input(self.verifier.polar(query)))
         candidates = [
             c.key
             for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)
@@ -512,9 +513,9 @@ class Localizer:
         expected = between(predicted, self.keyframes.poses[kf])  # T_scan_keyframe
         turn = float(expected[2])
         if self._prepared_key != query.key or self._prepared is None:
-            self._prepared = prepare(query.scan, odometry, query.twist)
+            self._prepared = self.verifier.prepared(query)
             self._prepared_key = query.key
-        aligned = prepare(turned(self.keyframes.scan(kf).scan, turn), odometry)
+        aligned = self.verifier.prepared(self.keyframes.scan(kf), turn)
         estimate = register(self._prepared, aligned, odometry)
         if not estimate.ok or estimate.quality < lcfg.verification.min_refined_quality:
             return None

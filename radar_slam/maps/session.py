@@ -7,9 +7,9 @@ frame), made with `Pipeline(on_keyframe=queries)` where `queries` is the map's
 1. looks for inter-session loops: as the run makes each of its map keyframes (every
    `maps.keyframe_spacing_m` of its odometry path), `queries` looks the keyframe's RaPlace
    descriptor up among all map keyframes and verifies the best candidates as loops are
-   (`radar_slam.loops.GeometricVerifier`, the raw scan against the map keyframe's stored image),
-   so that no scan is read or described again after the run; after the run, the verified ones,
-   in scan order, pass the same pairwise consistency gate as intra-session loops
+   (`radar_slam.loops.GeometricVerifier`, the scan's conditioned form against the map keyframe's
+   stored image), so that no scan is read or described again after the run; after the run, the
+   verified ones, in scan order, pass the same pairwise consistency gate as intra-session loops
    (`ConsistencyGate` with the session's optimised path: two loops must close the cycle through
    the session's trajectory and the map's), so a loop is accepted only once another one agrees
    with it;
@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from odometry import Scan
+from odometry import PolarScan, Scan
 from radar_slam.evaluation.truth import is_true_loop
 from radar_slam.graph import PoseGraph
 from radar_slam.loops import (
@@ -171,6 +171,7 @@ class InterSessionQueries:
         self,
         scan_index: int,
         frame: Scan,
+        polar: PolarScan,
         twist: FloatArray | None,
         descriptor: NDArray[np.float32],
     ) -> None:
@@ -179,6 +180,7 @@ class InterSessionQueries:
         Args:
             scan_index: its index in the session.
             frame: the raw scan.
+            polar: its conditioned form (`odometry.preprocess_polar`, the run's settings).
             twist: (3,) its sweep twist (vx, vy [m/s], yaw rate [rad/s]), or None.
             descriptor: its RaPlace descriptor made by the run (`LOOP_RAPLACE`, as the map's).
         """
@@ -188,7 +190,7 @@ class InterSessionQueries:
             for c in self.keyframes.recognizer.query(descriptor, cfg.candidates)
             if c.distance < cfg.max_descriptor_distance
         ]
-        query = KeyScan(scan_index, frame.timestamp_ns, frame, twist)
+        query = KeyScan(scan_index, frame.timestamp_ns, frame, twist, polar=polar)
         decisions = self.verified.setdefault(scan_index, [])
         for candidate in candidates:
             kf = int(candidate.key)

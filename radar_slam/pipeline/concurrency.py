@@ -12,8 +12,8 @@ Both keep the results independent of timing:
   thread; with the same lag both add the same loops at the same scans, so the graph, and every
   result, is the same. The detector needs only odometry poses, never the graph. A scan may come
   with its conditioned form from the odometry (`odometry.Odometry.prepared`), which the runner
-  offers to the detector's verifier (`GeometricVerifier.offer`) just before the detector sees the
-  scan, so a query is not conditioned twice. The map keyframes, which need only the odometry
+  hands to the detector with the scan: the detector describes and verifies the scan from it, so
+  a scan is conditioned once. The map keyframes, which need only the odometry
   too, are made in the same thread right after the detector has seen the scan
   (`radar_slam.maps.keyframes`): the conditioned form is the one the odometry made, and the
   descriptor the one the detector made, when it made one.
@@ -40,8 +40,6 @@ from radar_slam.maps.keyframes import KeyframeStage, NullKeyframeRecorder
 from radar_slam.pipeline.steps import StepTimer
 
 T = TypeVar("T")
-Offer = Callable[[int, PreparedScan], None]
-"""Takes a scan's key and its conditioned form (`GeometricVerifier.offer`)."""
 _STOP_POLL_S = 0.1
 """How often a blocked thread checks whether it was asked to stop [s]."""
 
@@ -166,7 +164,6 @@ class InlineLoopRunner:
         self._last = LoopStep(-1, [], (0, 0), [])
         self._state: tuple[int, tuple[int, int]] = (0, (0, 0))
         self._decisions: list[LoopDecision] = []
-        self._offer = offer_of(detector)
 
     # -- what the caller sees: the state as of the last loops handed out ----------------------
     def tally(self) -> tuple[int, int]:
@@ -186,9 +183,8 @@ class InlineLoopRunner:
         key: int,
         prepared: PreparedScan | None = None,
     ) -> None:
-        """Offer a scan with its odometry result (its pose T_world_scan) to the detector, then
-        to the map keyframes, and its conditioned form (if given) to the detector's verifier
-        and the keyframes."""
+        """Offer a scan with its odometry result (its pose T_world_scan) and its conditioned form
+        (if given) to the detector, then to the map keyframes."""
         self._done.append(self._step(frame, result, key, prepared))
 
     def due(self, key: int) -> list[LoopConstraint]:
@@ -226,12 +222,11 @@ class InlineLoopRunner:
         key: int,
         prepared: PreparedScan | None = None,
     ) -> LoopStep:
-        if prepared is not None and self._offer is not None:
-            self._offer(key, prepared)
+        polar = None if prepared is None else prepared.polar
         with self.timer("loop detection"):
-            loops = self.detector.add(frame, np.array(result.pose, dtype=np.float64), key)
+            loops = self.detector.add(frame, np.array(result.pose, dtype=np.float64), key, polar)
         with self.timer("map keyframes"):
-            self.keyframes.add(frame, None if prepared is None else prepared.polar, result)
+            self.keyframes.add(frame, polar, result)
         tally = self.detector.tally()
         # New decisions come with new proposals, status changes change the tally: copy the
         # decisions only then.
@@ -321,13 +316,6 @@ class ThreadedLoopRunner(InlineLoopRunner):
             step = self._outbox.get().get()
         self._last = step
         return step
-
-
-def offer_of(detector: LoopDetectorProtocol) -> Offer | None:
-    """The `offer` of the detector's verifier (`GeometricVerifier.offer`), or None when the
-    detector has no verifier that takes conditioned scans."""
-    offer = getattr(getattr(detector, "verifier", None), "offer", None)
-    return offer if callable(offer) else None
 
 
 def make_loop_runner(

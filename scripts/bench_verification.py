@@ -10,8 +10,8 @@ odometry, no graph) and measures in process CPU time, so a busy machine does not
 `--json OUT` writes every verification (keys, decision, reason, measurement, qualities).
 
 `--odometry` also runs the odometry on the scans (timed apart) and hands each scan's conditioned
-form to the verifier before the detector sees it (`GeometricVerifier.offer`), as the pipeline
-does, so the query scans are not conditioned again.
+form to the detector with the scan (`LoopDetector.add`), as the pipeline does, so the detector
+does not condition it again.
 
 `--profile N` runs the verifications under cProfile and prints the N functions with the most
 cumulative time per candidate (the profiler's overhead inflates the totals).

@@ -134,8 +134,9 @@ class Pipeline:
             (`Results.map_keyframes`: `radar_slam.maps.build_map` then reads no scan again);
             the database scans of the loop detector are recorded either way.
         on_keyframe: receives each map keyframe as its record is made, with its raw scan,
-            conditioned form, sweep twist and descriptor (`radar_slam.maps.keyframes.KeyframeListener`; e.g. the
-            inter-session queries of `radar-slam run --map`); implies `record_map`.
+            conditioned form, sweep twist and descriptor
+            (`radar_slam.maps.keyframes.KeyframeListener`; e.g. the inter-session queries of
+            `radar-slam run --map`); implies `record_map`.
     """
 
     def __init__(

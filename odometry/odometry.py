@@ -183,7 +183,7 @@ class Odometry:
 
     @property
     def prepared(self) -> PreparedScan | None:
-        """The last registered scan's conditioned form and spectra (shared: read-only) or None."""
+        """The last scan's conditioned form and spectra, a gap's too (read-only), or None."""
         return None if self._previous is None else self._previous.scan
 
     def register(self, frame: Scan, polar: PolarScan | None = None) -> OdometryResult:

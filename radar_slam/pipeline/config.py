@@ -65,7 +65,7 @@ def load_config(
 ) -> PipelineConfig:
     """Defaults in code, then `configs/<family>.yaml` (when shipped), then the file `path`, then
     `overrides` (a nested mapping). Unknown keys and wrong types are `ConfigError`s."""
-    return _layered(family, _user_layers(path, overrides))
+    return _merged(_family_layers(family) + _user_layers(path, overrides))
 
 
 _Layer = tuple[dict[str, Any], str]
@@ -91,12 +91,6 @@ def _family_layers(family: str | None) -> list[_Layer]:
         return []
     shipped = family_config_path(family)
     return [(read_yaml(shipped), str(shipped))] if shipped.is_file() else []
-
-
-def _layered(family: str | None, user: list[_Layer]) -> PipelineConfig:
-    """Defaults, then the family's shipped YAML (when `family` is given and ships one), then
-    the `user` layers in order."""
-    return _merged(_family_layers(family) + user)
 
 
 def _merged(layers: list[_Layer]) -> PipelineConfig:

@@ -211,7 +211,7 @@ class Pipeline:
                 if held is not None:
                     self._extend_graph(self.odometry.result(index - 1))
                     self._submit(*held, index - 1)
-                held = (frame, self.odometry.prepared)  # 15V: its conditioned scan
+                held = (frame, self.odometry.prepared)  # its conditioned form
                 self._close_loops(self.loops.due(index), index)
                 self._report(index + 1)
                 if self.observer is not None:

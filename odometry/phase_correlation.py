@@ -129,16 +129,17 @@ def correlate(
     return inverse(cross)
 
 
-@numba.njit(nogil=True, cache=True)
+@numba.njit(nogil=True, cache=True, error_model="numpy")  # vectorised: no zero-divisor checks
 def _cross_power_kernel(ref, mov, weights, ramp, half_turn, out):  # type: ignore[no-untyped-def]  # fmt: skip
     """out = weights * C / (|C| + eps) on packed spectra (`_whitened_product`), float32."""
     h, w = out.shape
     zero = np.float32(0.0)
     for i in range(h):
-        for j in range(1, w - 1, 2):
-            out[i, j], out[i, j + 1] = _whitened_product(
-                mov[i, j], mov[i, j + 1], ref[i, j], ref[i, j + 1], ramp[i, j], ramp[i, j + 1],
-                half_turn, weights[i, j],
+        m, r, p, o = mov[i], ref[i], ramp[i], out[i]
+        for k in range(1, w // 2):  # (Re, Im) at columns (2 k - 1, 2 k)
+            o[2 * k - 1], o[2 * k] = _whitened_product(
+                m[2 * k - 1], m[2 * k], r[2 * k - 1], r[2 * k], p[2 * k - 1], p[2 * k],
+                half_turn, weights[i, 2 * k - 1],
             )  # fmt: skip
     for j in (0, w - 1):
         for i in range(1, h - 1, 2):
@@ -419,19 +420,18 @@ def _gaussian_lowpass_1d(n: int, smoothing: float) -> FloatArray:
     return weights
 
 
-@numba.njit(nogil=True, cache=True)
+@numba.njit(nogil=True, cache=True, error_model="numpy")  # vectorised: no zero-divisor checks
 def _summed_cross_power(s_ref, s_mov, out_re, out_im):  # type: ignore[no-untyped-def]  # fmt: skip
     """out[k] += sum over rows of C / (|C| + eps), C = mov * conj(ref), frequencies k >= 1."""
-    n = s_ref.shape[1]
-    one = np.float32(1.0)
+    n, one = s_ref.shape[1], np.float32(1.0)
     for i in range(s_ref.shape[0]):
+        m, r = s_mov[i], s_ref[i]
         for k in range(1, (n - 1) // 2 + 1):
             c_re, c_im = _whitened_product(
-                s_mov[i, 2 * k - 1], s_mov[i, 2 * k], s_ref[i, 2 * k - 1], s_ref[i, 2 * k],
-                one, one, False, one,
-            )  # fmt: skip
+                m[2 * k - 1], m[2 * k], r[2 * k - 1], r[2 * k], one, one, False, one
+            )
             out_re[k] += c_re
             out_im[k] += c_im
         if n % 2 == 0:  # the real Nyquist value
-            c = s_mov[i, n - 1] * s_ref[i, n - 1]
+            c = m[n - 1] * r[n - 1]
             out_re[n // 2] += c / (np.float32(abs(c)) + np.float32(SPECTRUM_EPS))

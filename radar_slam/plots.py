@@ -1,19 +1,22 @@
-"""PNG plots of trajectories and precision-recall curves (matplotlib, Agg, no pyplot state)."""
+"""PNG plots of trajectories and precision-recall curves (matplotlib, Agg, no pyplot state).
+
+matplotlib loads when a figure is first made (`MATPLOTLIB_MODULES`), not with this module: a run
+draws at its end only, and `radar-slam run` loads it on a thread while the scans go by."""
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import LineCollection
-from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from radar_slam.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 logger = logging.getLogger(__name__)
 
@@ -32,9 +35,18 @@ TRAJECTORY_COLOURS = {GT_KEY: "black", "odometry": "tab:blue", "slam": "tab:oran
 """The same colours in every figure (trajectory.png, batch's summary.png) and the viewer."""
 GT_Z_ORDER = 3
 """GT is drawn over the estimates (dashed), so that it is never hidden under them."""
+MATPLOTLIB_MODULES = (
+    "matplotlib.figure",
+    "matplotlib.backends.backend_agg",
+    "matplotlib.collections",
+)
+"""The matplotlib modules the figures of a result folder use (imported on first use)."""
 
 
 def _new_figure() -> Figure:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=FIGURE_SIZE_IN, dpi=DPI)
     FigureCanvasAgg(figure)
     return figure
@@ -75,6 +87,8 @@ def plot_trajectories(
             style.update(linestyle="--", zorder=GT_Z_ORDER)
         axes.plot(xy[:, 0], xy[:, 1], label=name, linewidth=TRAJECTORY_LINE_WIDTH, **style)
     if loops is not None and len(loops):
+        from matplotlib.collections import LineCollection
+
         segments = np.asarray(loops, dtype=np.float64).reshape(-1, LOOP_COLUMNS).reshape(-1, 2, 2)
         segments = segments - origin
         axes.add_collection(

@@ -10,6 +10,7 @@ import typer
 from typer.testing import CliRunner
 
 from radar_slam.cli import app
+from radar_slam.cli_app import COMMANDS, command_of, make_app
 
 BRACKETED = re.compile(r"\[[^\]\s]+\]")
 
@@ -48,3 +49,22 @@ def test_help_shows_bracketed_words(path: list[str]) -> None:
     shown = " ".join(result.output.split())
     for word in _bracketed_words(command):
         assert word in shown, f"{' '.join(path)} --help lost {word}"
+
+
+def _names(app: typer.Typer) -> list[str]:
+    root: Any = typer.main.get_command(app)
+    return list(root.list_commands(typer.Context(root)))
+
+
+@pytest.mark.parametrize("module", list(COMMANDS))
+def test_a_command_loads_only_its_module(module: str) -> None:
+    for name in COMMANDS[module]:
+        assert _names(make_app(name)) == list(COMMANDS[module])
+
+
+def test_the_whole_app_has_every_module_s_commands() -> None:
+    every = [name for names in COMMANDS.values() for name in names]
+    assert sorted(_names(app)) == sorted(every)
+    assert _names(make_app("no-such-command")) == _names(app)
+    assert command_of(["-v", "--verbose", "run", "synthetic/loop"]) == "run"
+    assert command_of(["--help"]) is None

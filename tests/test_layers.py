@@ -48,3 +48,14 @@ def test_datasets_load_the_simulator_only_as_a_plug_in() -> None:
     assert "radar_slam.sim.family" in loaded_after(
         "from radar_slam.datasets import families\nassert 'synthetic' in families()"
     )
+
+
+def test_the_run_command_loads_the_end_of_run_modules_on_first_use() -> None:
+    modules = loaded_after("import radar_slam.commands.run")
+    assert "radar_slam.commands.run" in modules
+    assert under(modules, "matplotlib", "evo") == set()
+    assert {"matplotlib", "evo"} <= loaded_after(
+        "from radar_slam.lazy import preload\n"
+        "from radar_slam.commands.run import END_OF_RUN_MODULES\n"
+        "preload(END_OF_RUN_MODULES).join()"
+    )

@@ -21,6 +21,7 @@ from radar_slam.maps.boreas import BOREAS_FILE, read_boreas
 from radar_slam.maps.build import select_keyframes
 from radar_slam.maps.evaluate import evaluate_localization
 from radar_slam.maps.format import DATA_FILES, MANIFEST_FILE, encode_map
+from radar_slam.maps.images import SCALE_PERCENTILE, quantise, top_level
 from radar_slam.maps.localizer import Localization, Localizer
 from radar_slam.maps.session import InterSessionQueries, join_session
 from radar_slam.maps.writers import LOCALIZATION_CSV_COLUMNS
@@ -146,6 +147,37 @@ def test_map_info(saved_map: Path, tiny_map: Map, capsys: pytest.CaptureFixture[
     assert info["gt_alignment"] is not None
     assert main(["map", "info", str(saved_map)]) == 0
     assert "GT alignment" in capsys.readouterr().out
+
+
+def _percentile_images() -> list[np.ndarray]:
+    rng = np.random.default_rng(5)
+    sparse = rng.exponential(1.0, (400, 400)).astype(np.float32)
+    sparse[rng.random((400, 400)) < 0.9] = 0.0  # mostly empty, like a conditioned scan's image
+    ties = rng.integers(0, 5, (400, 400)).astype(np.float32)
+    with_nan = rng.random((50, 40), dtype=np.float32)
+    with_nan[7, 3] = np.nan
+    return [sparse, ties, rng.random((3, 2), dtype=np.float32), with_nan, rng.random((400, 400))]
+
+
+def test_top_level_is_the_images_percentile() -> None:
+    ramp = np.random.default_rng(4).permutation(np.arange(160_000, dtype=np.float32))
+    assert top_level(ramp.reshape(400, 400)) == pytest.approx(0.999 * 159_999, abs=0.01)
+    for image in _percentile_images():
+        expected = float(np.percentile(image, SCALE_PERCENTILE))
+        assert top_level(image) == expected or np.isnan(expected) and np.isnan(top_level(image))
+
+
+def test_quantised_levels() -> None:
+    relative = np.array([[-1.0, 0.0, 0.05, 0.25, 0.5, 1.0, 4.0]], dtype=np.float32)
+    np.testing.assert_array_equal(
+        quantise(2.0 * relative, 2.0, 0.1, 15), [[0, 0, 0, 8, 11, 15, 15]]
+    )
+    for image in _percentile_images()[:3]:
+        for scale in (0.3, 1.7, 1e-4):
+            expected = np.clip(image / scale, 0.0, 1.0)
+            expected[expected < 0.1] = 0.0
+            expected = np.rint(np.sqrt(expected) * 15).astype(np.uint8)
+            np.testing.assert_array_equal(quantise(image, scale, 0.1, 15), expected)
 
 
 def test_keyframe_image_verifies_like_the_scan(tiny_loop: RadarSequence) -> None:

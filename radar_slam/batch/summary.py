@@ -15,8 +15,6 @@ from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from radar_slam.batch.tasks import BatchRow
 from radar_slam.plots import TRAJECTORY_COLOURS
@@ -74,6 +72,9 @@ def markdown_text(rows: Sequence[BatchRow]) -> str:
 def plot_summary(path: Path, rows: Sequence[BatchRow]) -> None:
     """Horizontal bars of odometry and SLAM ATE per run; failed runs (or runs without ground
     truth) are labelled instead of drawn."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     labels = [f"{r.sequence} [{r.config}]" for r in rows]
     odometry = np.array([np.nan if r.ate_odometry_m is None else r.ate_odometry_m for r in rows])
     slam = np.array([np.nan if r.ate_slam_m is None else r.ate_slam_m for r in rows])

@@ -28,6 +28,8 @@ from radar_slam.commands.options import (
 )
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.datasets.stride import strided
+from radar_slam.evaluation.metrics import EVO_MODULES
+from radar_slam.lazy import preload
 from radar_slam.maps.build import build_map  # every run writes map/
 from radar_slam.maps.format import Map, write_map
 from radar_slam.maps.session import InterSessionQueries, join_session  # run --map
@@ -41,16 +43,22 @@ from radar_slam.outputs import (
 from radar_slam.pipeline import (
     Pipeline,
     PipelineConfig,
+    Progress,
+    ProgressCallback,
     Results,
     frame_count,
     open_configured,
     run_odometry,
 )
+from radar_slam.plots import MATPLOTLIB_MODULES
 from radar_slam.results import check_output_root, check_result_location, write_result_dir
 from radar_slam.viewer import SPAWN, RerunViewer, check_viewer_target, import_rerun
 
 MAP_FOLDER = "map"
 """The map every SLAM run writes into its result folder (`radar_slam.maps`)."""
+END_OF_RUN_MODULES = (*EVO_MODULES, *MATPLOTLIB_MODULES)
+"""Loaded on a thread while the scans go by (`radar_slam.lazy.preload`): the evaluation and the
+plots need them only after the last scan."""
 SEQUENCE_ARGUMENT = typer.Argument(
     ...,
     help="Sequence: family/name (mulran/KAIST01, oxford/..., boreas/..., radiate/..., "
@@ -71,6 +79,22 @@ VIEWER_OPTION = typer.Option(  # live viewer
 STRIDE_OPTION = typer.Option(  # strided view of the sequence
     1, "--stride", min=1, help="Use every K-th scan (4 Hz data at --stride 4 is 1 Hz)."
 )
+
+
+def preloaded_by_last_scan(
+    progress: ProgressCallback, modules: tuple[str, ...]
+) -> ProgressCallback:
+    """`progress`, with `modules` loaded on a thread from now until the run reports the first
+    step after its last scan (the report waits for the thread then: the evaluation and the
+    plots import them next)."""
+    loader = preload(modules)
+
+    def report(update: Progress) -> None:
+        if update.step:
+            loader.join()
+        progress(update)
+
+    return report
 
 
 def without_loops(config: PipelineConfig) -> PipelineConfig:
@@ -118,7 +142,7 @@ def run_command(
                 seq,
                 settings,
                 max_frames=max_frames,
-                progress=bar,
+                progress=preloaded_by_last_scan(bar, END_OF_RUN_MODULES),
                 observer=observer,
                 record_map=True,  # map/ is written from what the run keeps
                 on_keyframe=queries,  # run --map: each keyframe looked up in the map

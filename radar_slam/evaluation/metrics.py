@@ -12,24 +12,26 @@ Conventions:
   mirrored or collinear planar trajectory with a rotation about an in-plane axis (a flip that
   hides the error) or fail; we check its result and otherwise solve the 2-D problem, also with
   evo's `umeyama_alignment`.
+
+evo loads on first use (`EVO_MODULES`), not with this module: a run evaluates at its end only,
+and `radar-slam run` loads it on a thread while the scans go by.
 """
 
 from __future__ import annotations
 
 import logging
 from dataclasses import asdict, dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-from evo import EvoException
-from evo.core import geometry
-from evo.core.metrics import APE, RPE, PoseRelation, StatisticsType, Unit
-from evo.core.trajectory import PoseTrajectory3D
 from numpy.typing import NDArray
 
 from radar_slam.errors import TrajectoryError
 from radar_slam.trajectory import Trajectory
 from raplace import NS_PER_MS, between, compose, inverse, wrap_angle
+
+if TYPE_CHECKING:
+    from evo.core.trajectory import PoseTrajectory3D
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +41,8 @@ Alignment = Literal["umeyama", "origin", "none"]
 DeltaUnit = Literal["frames", "m"]
 
 DEFAULT_MAX_TIME_DIFF_NS = 1_000_000  # 1 ms: association tolerance by timestamp
+EVO_MODULES = ("evo.core.metrics", "evo.core.trajectory", "evo.core.geometry")
+"""The evo modules the metrics use (imported on first use)."""
 DEFAULT_RPE_DELTA = 1  # frames
 KITTI_SEGMENT_LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 KITTI_START_STEP_FRAMES = 10  # the devkit starts a segment every 10 frames
@@ -107,6 +111,8 @@ def to_evo(traj: Trajectory) -> PoseTrajectory3D:
 
     Built from SE(3) matrices, vectorised (evo converting quaternions one by one is slow).
     """
+    from evo.core.trajectory import PoseTrajectory3D
+
     x, y, yaw = traj.poses.T
     c, s = np.cos(yaw), np.sin(yaw)
     mats = np.zeros((len(traj), 4, 4))
@@ -140,6 +146,9 @@ def umeyama_alignment_se2(est: Trajectory, gt: Trajectory) -> FloatArray:
     (x, y) rows, whose reflection guard keeps a proper rotation about z. If even that is
     degenerate (all positions equal), only the centroids are aligned.
     """
+    from evo import EvoException
+    from evo.core import geometry
+
     if len(est) != len(gt):
         raise TrajectoryError("alignment needs associated trajectories of equal length")
     evo_est = to_evo(est)
@@ -189,6 +198,8 @@ def _require_pairs(est: Trajectory, gt: Trajectory, minimum: int = MIN_POSES) ->
 
 def ate_rmse(est: Trajectory, gt: Trajectory, alignment: Alignment = "umeyama") -> float:
     """Absolute trajectory error RMSE [m] of the translation after `alignment` (evo APE)."""
+    from evo.core.metrics import APE, PoseRelation, StatisticsType
+
     _require_pairs(est, gt, minimum=1)
     aligned = align(est, gt, alignment)
     ape = APE(PoseRelation.translation_part)
@@ -201,6 +212,8 @@ def ate_origin_rmse(est: Trajectory, gt: Trajectory) -> float:
 
     This is the convention of the radar odometry papers, so our numbers compare with theirs.
     """
+    from evo.core.metrics import APE, PoseRelation, StatisticsType
+
     _require_pairs(est, gt, minimum=1)
     evo_est, evo_gt = to_evo(est), to_evo(gt)
     evo_est.align_origin(evo_gt)
@@ -220,6 +233,9 @@ def rpe_trans_rmse(
     unit="frames": pairs (i, i + delta) for every i. unit="m": consecutive pairs about `delta`
     metres apart along the ground-truth path (evo's default 10 % tolerance).
     """
+    from evo import EvoException
+    from evo.core.metrics import RPE, PoseRelation, StatisticsType, Unit
+
     _require_pairs(est, gt)
     delta_unit = Unit.frames if unit == "frames" else Unit.meters
     try:

@@ -112,7 +112,8 @@ def _correlation(a: FloatArray, b: FloatArray) -> tuple[float, int]:
     n = int(both.sum())
     if n < 3:
         return float("nan"), n
-    x, y = a[both] - a[both].mean(), b[both] - b[both].mean()
+    a, b = a[both], b[both]
+    x, y = a - a.mean(), b - b.mean()
     denominator = float(np.sqrt(np.sum(x * x) * np.sum(y * y)))
     return (float(np.sum(x * y) / denominator) if denominator > 0 else float("nan")), n
 

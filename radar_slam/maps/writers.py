@@ -24,8 +24,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from radar_slam.maps.boreas import BOREAS_FILE, write_boreas
 from radar_slam.maps.evaluate import LocalizationMetrics
@@ -97,6 +95,9 @@ def plot_localization(path: Path, m: Map, fixes: Sequence[Localization], title: 
     """Top view in the map frame: keyframes (grey dots), the localised trajectory, the
     relocalisations (green circles), and lost scans (red crosses at the last localised
     position: a lost scan has no pose)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=FIGURE_SIZE_IN, dpi=DPI)
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()

@@ -303,6 +303,7 @@ class ThreadedLoopRunner(InlineLoopRunner):
 
     def close(self) -> None:
         self._stop.set()
+        self._inbox.put(None)  # wakes the worker now, not at its next poll
         if self._thread is not None:
             self._thread.join()
             self._thread = None

@@ -15,7 +15,13 @@ from scipy.spatial import cKDTree
 
 from radar_slam.datasets import open_sequence
 from radar_slam.errors import RadarSlamError
-from radar_slam.sim.driving import Leg, PlanDrivingConfig, arc, drive_legs
+from radar_slam.sim.driving import (
+    STEERING_TRANSITION_M,
+    Leg,
+    PlanDrivingConfig,
+    arc,
+    drive_legs,
+)
 from radar_slam.sim.generate import generate_sequence, lay_out
 from radar_slam.sim.route import Trajectory
 from radar_slam.sim.scenarios import (
@@ -36,6 +42,11 @@ MAX_ACCEL_MPS2 = 3.0
 ACCEL_TOLERANCE_MPS2 = 0.05
 MAX_YAW_RATE = 0.8  # rad/s: 5 m/s on a 6 m radius
 ACCEL_WINDOW_S = 0.1
+STEERING_WINDOW_S = 0.3
+MAX_YAW_RATE_CHANGE_DPS = 25.0
+"""Over `STEERING_WINDOW_S` the real Edinburgh drive's IMU changes its yaw rate by at most about
+15 deg/s; a curvature step would change it by a whole turn's yaw rate (about 30 deg/s and more
+in these drives)."""
 LANE_BAND_M = (3.0, 4.0)  # opposite lanes are 3.5 m apart
 OPPOSITE_TOLERANCE_RAD = np.deg2rad(20.0)
 CI_MAX_FRAMES = 700
@@ -196,18 +207,30 @@ def count_curvature_steps(poses: np.ndarray, radius_m: float, step_m: float = 0.
     return len(runs(onset))
 
 
-def test_junction_turns_step_in_curvature(scenes: dict[str, Drive]) -> None:
+def test_junction_turns_steer_in_and_out_over_metres(scenes: dict[str, Drive]) -> None:
     scene = scenes["junction_turns"]
     _, poses, forward = kinematics(scene)
     cfg = PlanDrivingConfig()
     radius = max(cfg.left_turn_radius_m, cfg.right_turn_radius_m)
-    assert count_curvature_steps(poses, radius) == 5  # all five turns
-    assert count_curvature_steps(poses[::-1], radius) == 5  # and out of them
+    assert count_curvature_steps(poses, radius) == 0  # no curvature step into a turn
+    assert count_curvature_steps(poses[::-1], radius) == 0  # nor out of one
+    kappa = curvature_by_distance(poses, 0.25)
+    ramp = np.abs(np.diff(kappa)).max() / 0.25  # [1/m per m]
+    tightest = 1.0 / min(cfg.left_turn_radius_m, cfg.right_turn_radius_m)
+    assert ramp == pytest.approx(tightest / STEERING_TRANSITION_M, rel=0.25)  # a linear ramp
     assert forward.max() > 12.0  # urban speeds between the junctions
     heading_change = np.abs(np.diff(np.unwrap(poses[:, 2])))
     assert np.rad2deg(heading_change.sum()) == pytest.approx(5 * 90.0, abs=1.0)
-    # The smooth drive of the existing scenarios has no such step.
-    assert count_curvature_steps(kinematics(laid_out("tiny_loop"))[1], 12.0) == 0
+
+
+@pytest.mark.parametrize("name", [s.name for s in DRIVING_SCENARIOS])
+def test_yaw_rate_changes_as_fast_as_a_steered_car(scenes: dict[str, Drive], name: str) -> None:
+    t, poses, _ = kinematics(scenes[name])
+    every = int(round(ACCEL_WINDOW_S / np.diff(t[:2])[0]))
+    yaw_rate = np.diff(poses[::every, 2]) / ACCEL_WINDOW_S
+    lag = int(round(STEERING_WINDOW_S / ACCEL_WINDOW_S))
+    change = np.rad2deg(np.abs(yaw_rate[lag:] - yaw_rate[:-lag]))
+    assert change.max() <= MAX_YAW_RATE_CHANGE_DPS
 
 
 def test_reverse_gear_stretch(scenes: dict[str, Drive]) -> None:

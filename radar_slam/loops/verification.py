@@ -61,7 +61,7 @@ MAX_DISAGREEMENT_DEG = 3.0
 """... and their rotations by this much [deg]."""
 MAX_SIGMA_YAW_DEG = 1.0
 """The loop's rotation standard deviation (`loop_covariance`) may be at most this [deg]. It is
-large when a scan was swept across a yaw-rate change (a curvature step at a junction, the end of
+large when a scan was swept across a yaw-rate change (the steering into a junction turn, the end of
 a turn), which no constant de-skew twist represents: such loops' rotations are off by degrees.
 1 deg puts the 2 deg error bound of a true loop (`radar_slam.evaluation.truth`) at two sigmas."""
 YAW_RATE_SEARCH = True

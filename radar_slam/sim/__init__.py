@@ -6,7 +6,7 @@ Modules, in pipeline order:
     scatterers.py the world's data model: scatterers, occluders, traffic, World
     world.py      a town populated with scatterers: facades, cars, vegetation, traffic
     route.py      the ego vehicle's drive through the streets (5-15 m/s, smooth turns)
-    driving.py    drives of constant-curvature legs: reverse gear, stops, stepped curvature
+    driving.py    drives of constant-curvature legs: reverse gear, stops, steering transitions
     manoeuvres.py plans: a route plus stops, roundabouts, U-turns, three-point turns, reversing
     sensor.py     scan geometry and timing (CIR204-H by default)
     physics.py    every physical effect as a named, configurable dataclass

@@ -2,12 +2,13 @@
 
 The smooth lattice drive of `route.py` turns along Gaussian-smoothed corners at 5-15 m/s and
 never stops. This module drives what that cannot: a path made of legs of piecewise-constant
-curvature (so the curvature, and with it the yaw rate, steps at a leg boundary), driven in forward
-or reverse gear (reverse: negative forward speed, the vehicle heading unchanged), with standing
-times, a speed profile limited by lateral acceleration and by longitudinal acceleration and
-braking (constant acceleration between path samples, exact in time), and its time
-parametrisation into the same `Trajectory` as route.py. `manoeuvres.py` turns a lattice route
-plus events (stops, roundabouts, U-turns, three-point turns, reversing) into legs.
+curvature (the moving vehicle steers from one leg's to the next over `STEERING_TRANSITION_M`;
+standing, at once), driven in forward or reverse gear (reverse: negative forward speed, the
+vehicle heading unchanged), with standing times, a speed profile limited by lateral acceleration
+and by longitudinal acceleration and braking (constant acceleration between path samples, exact
+in time), and its time parametrisation into the same `Trajectory` as route.py. `manoeuvres.py`
+turns a lattice route plus events (stops, roundabouts, U-turns, three-point turns, reversing)
+into legs.
 
 Poses are those of the vehicle base (x forward, y left) in the town frame.
 """
@@ -15,7 +16,7 @@ Poses are those of the vehicle base (x forward, y left) in the town frame.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +28,12 @@ FloatArray = NDArray[np.float64]
 
 MIN_LEG_M = 1e-6
 """Legs shorter than this are dropped [m]."""
+STEERING_TRANSITION_M = 8.0
+"""A moving vehicle's curvature changes linearly over this distance [m] centred on a leg boundary
+(a clothoid: the steering turned at a steady rate). Its yaw rate then changes about as fast as
+the real Edinburgh drive's (IMU) does, where a step would change it by a whole turn's at once."""
+LANE_KEEPING_M = 40.0
+"""The sideways offset a steering transition leaves is eased out over this distance [m]."""
 
 
 @dataclass(frozen=True)
@@ -158,8 +165,9 @@ def integrate_legs(
     ~`step_m` [m].
 
     Constant-curvature kinematics in closed form, so arcs and straights are exact and the
-    curvature steps at leg boundaries. The vehicle stops at the end of a leg with `stop_s` and
-    before every gear change (standing at least `gear_change_s` [s] there).
+    curvature steps at leg boundaries (`steered` spreads the steps). The vehicle stops at the end
+    of a leg with `stop_s` and before every gear change (standing at least `gear_change_s` [s]
+    there).
     """
     legs = [leg for leg in legs if leg.length_m > MIN_LEG_M]
     if not legs:
@@ -196,6 +204,37 @@ def integrate_legs(
         stop=np.array(stop, dtype=bool),
         dwell_s=np.array(dwell),
     )
+
+
+def steered(path: PathSamples, transition_m: float) -> PathSamples:
+    """`path` with each curvature step between two stops spread linearly over `transition_m` [m]
+    (a moving average of the heading change per metre: every turn keeps its heading change; at a
+    stop the steering may turn standing), its poses integrated again; the sideways offset this
+    leaves after a turn (a few cm) is eased out over `LANE_KEEPING_M`."""
+    ds = np.diff(path.s)
+    step = float(np.median(ds))
+    width = int(round(transition_m / step))
+    if width < 2:
+        return path
+    curvature = path.curvature.copy()
+    stops = np.flatnonzero(path.stop[1:-1]) + 1  # intervals split at standing samples
+    for a, b in zip(np.r_[0, stops], np.r_[stops, len(ds)], strict=True):
+        padded = np.pad(path.curvature[a:b], (width // 2, width - 1 - width // 2), "edge")
+        curvature[a:b] = np.convolve(padded, np.ones(width) / width, "valid")
+    turn = curvature * ds
+    heading = path.poses[0, 2] + np.concatenate([[0.0], np.cumsum(turn)])
+    chord = path.gear * ds * np.sinc(turn / (2.0 * np.pi))  # exact on each constant-rate piece
+    along = np.column_stack([np.cos(heading[:-1] + 0.5 * turn), np.sin(heading[:-1] + 0.5 * turn)])
+    xy = path.poses[0, :2] + np.concatenate([[[0.0, 0.0]], np.cumsum(chord[:, None] * along, 0)])
+    keep = int(round(LANE_KEEPING_M / step)) | 1
+    offset = np.pad(xy - path.poses[:, :2], ((keep // 2, keep // 2), (0, 0)), "edge")
+    eased = [np.convolve(offset[:, k], np.ones(keep) / keep, "valid") for k in range(2)]
+    moved = np.hypot(*np.diff(xy - np.column_stack(eased), axis=0).T)
+    ds *= moved / np.hypot(*np.diff(xy, axis=0).T)  # the distance the easing adds or removes
+    xy -= np.column_stack(eased)
+    s = np.concatenate([[0.0], np.cumsum(ds)])
+    curvature = np.diff(heading) / ds
+    return replace(path, s=s, poses=np.column_stack([xy, heading]), curvature=curvature)
 
 
 def speed_profile(path: PathSamples, cfg: PlanDrivingConfig) -> FloatArray:
@@ -244,5 +283,7 @@ def drive_legs(
     start: tuple[float, float, float], legs: list[Leg], cfg: PlanDrivingConfig
 ) -> Trajectory:
     """The trajectory of `legs` driven from `start` (x [m], y [m], heading [rad])."""
-    path = integrate_legs(start, legs, PATH_STEP_M, cfg.gear_change_s)
+    path = steered(
+        integrate_legs(start, legs, PATH_STEP_M, cfg.gear_change_s), STEERING_TRANSITION_M
+    )
     return time_parametrise(path, speed_profile(path, cfg))

@@ -3,7 +3,7 @@
 A plan drives a lattice route (see route.py) through a town with straight streets (a town laid
 out with `warp_amplitude_m = 0`: streets are exact straight lines between their nodes, so every
 lane and junction is exact geometry) in the right-hand lane. At a junction the route turns on a
-circular arc tangent to both lanes: the curvature steps from zero to 1/R and back (no clothoid).
+circular arc tangent to both lanes, entered and left while steering (driving.py's transitions).
 Events add what real urban driving has and the smooth drive of route.py has not:
 
 - `Stop`: stand still before a junction (a stop line or a red light), e.g. 10 s.

@@ -23,7 +23,7 @@ turn_around, u_turn, three_point_turn, roundabout, stop_and_go, junction_turns, 
 roundabouts (six in a row, a tuning scenario for yaw-rate reversals), and the held-out
 heldout_town, heldout_mixed, heldout_junctions, heldout_revisits and heldout_fast (`HELD_OUT`:
 benchmarks report them separately and nobody tunes on them). All but turn_around drive a plan
-(manoeuvres.py) with stepped curvature.
+(manoeuvres.py): legs of constant curvature joined by steering transitions.
 """
 
 from __future__ import annotations
@@ -67,12 +67,9 @@ from radar_slam.sim.waypoints import (
 from radar_slam.sim.world import ObjectConfig
 from raplace import NS_PER_S
 
-SIM_VERSION = "1.2"
+SIM_VERSION = "1.4"
 """Bump when the output for a given scenario and seed changes (regenerates cached sequences).
-1.2: `reverse` became a figure-eight driven both ways (the other scenarios are unchanged)."""
-SCENARIO_VERSIONS: dict[str, str] = {"long_city": "1.3"}
-"""Scenarios whose output changed without the others' changing: only they are regenerated.
-1.3: `long_city` turns round at its route reversals (three-point turns, reversal.py)."""
+1.4: cars steer into and out of curvature; towns of long street canyons lined with parked cars."""
 
 EPOCH_NS = 1_567_000_000_000_000_000
 """Start of the default scenarios' clocks (late August 2019, like MulRan) [ns]."""
@@ -103,8 +100,8 @@ class Scenario:
         start_ns: time of the first scan's first column [ns].
         origin_xy: offset of the town frame in the written poses [m].
         sensor, physics, town, objects, driving: configuration sections.
-        plan: events and driving of a stepped-curvature drive (manoeuvres.py) in a town with
-            straight streets; None: the smooth lattice drive of route.py with `driving`.
+        plan: events and driving of a drive of constant-curvature legs (manoeuvres.py) in a town
+            with straight streets; None: the smooth lattice drive of route.py with `driving`.
         held_out: a benchmark scenario nobody tunes on (benchmarks report it separately).
     """
 
@@ -339,7 +336,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
     ),
     Scenario(
         name="junction_turns",
-        description="five sharp 90-degree junction turns, curvature stepping 0 -> 1/R -> 0, "
+        description="five sharp 90-degree junction turns, curvature 0 -> 1/R -> 0 within metres, "
         "12-14 m/s between them",
         seed=36,
         waypoints=JUNCTION_ROUTE,
@@ -374,7 +371,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
     ),
     Scenario(
         name="heldout_town",
-        description="HELD OUT: 1.2 km through another town: stepped junction turns, a turn back "
+        description="HELD OUT: 1.2 km through another town: sharp junction turns, a turn back "
         "round a block, three stops, a U-turn",
         seed=41,
         waypoints=HELD_OUT_TOWN_ROUTE,
@@ -461,7 +458,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
     ),
 )
 """Scenarios of urban driving the smooth lattice drive lacks: turning round, gear
-changes, roundabouts, stops, stepped curvature; and the held-out benchmark scenarios."""
+changes, roundabouts, stops, sharp turns; and the held-out benchmark scenarios."""
 
 
 def reduced_bin_versions() -> list[Scenario]:
@@ -496,7 +493,7 @@ DEFAULT_SCENARIO = "loop"
 
 def simulator_version(scenario: str) -> str:
     """Version of the simulator output of scenario `scenario` (written into its markers)."""
-    return SCENARIO_VERSIONS.get(scenario, SIM_VERSION)
+    return SIM_VERSION
 
 
 def get_scenario(name: str) -> Scenario:

@@ -55,6 +55,12 @@ PARKING_INSET_M = 1.1
 class TownConfig:
     """Parameters of the town layout (ranges are uniform (min, max) draws).
 
+    The defaults build long street canyons: long blocks, near-continuous facades, few open lots
+    and free-standing buildings, parking along most streets. A real scan is dominated by the
+    street it is driven along; a town seen through gaps between buildings makes every place
+    look different and place recognition easy (docs/benchmarks.md, "Simulated places against
+    real ones").
+
     Attributes:
         n_blocks: lattice cells along (x, y); nodes are (n_blocks + 1) per axis.
         block_size_m: side length of a lattice cell [m].
@@ -92,7 +98,7 @@ class TownConfig:
     """
 
     n_blocks: tuple[int, int] = (6, 5)
-    block_size_m: tuple[float, float] = (85.0, 135.0)
+    block_size_m: tuple[float, float] = (120.0, 190.0)
     warp_amplitude_m: float = 14.0
     warp_wavelength_m: tuple[float, float] = (400.0, 900.0)
     warp_components: int = 3
@@ -104,12 +110,12 @@ class TownConfig:
     sidewalk_m: tuple[float, float] = (2.0, 5.0)
     building_width_m: tuple[float, float] = (8.0, 40.0)
     building_depth_m: tuple[float, float] = (8.0, 28.0)
-    building_gap_m: tuple[float, float] = (1.0, 9.0)
-    open_lot_probability: float = 0.15
+    building_gap_m: tuple[float, float] = (0.5, 3.0)
+    open_lot_probability: float = 0.05
     open_lot_m: tuple[float, float] = (15.0, 45.0)
     yaw_jitter_deg: float = 3.0
-    odd_orientation_probability: float = 0.12
-    interior_buildings_per_km2: float = 600.0
+    odd_orientation_probability: float = 0.03
+    interior_buildings_per_km2: float = 150.0
     building_min_gap_m: float = 1.5
     park_patches_per_km2: float = 160.0
     park_axis_m: tuple[float, float] = (4.0, 18.0)
@@ -120,7 +126,7 @@ class TownConfig:
     fence_fraction: float = 0.2
     hedge_fraction: float = 0.25
     clutter_per_m: float = 0.08
-    parking_fraction: float = 0.5
+    parking_fraction: float = 0.9
     parking_min_half_width_m: float = 5.2
     parking_slot_m: float = 6.0
     raster_cell_m: float = 0.5

@@ -127,7 +127,7 @@ class ObjectConfig:
     car_length_m: float = 4.5
     car_width_m: float = 1.8
     car_penetration_db: float = 8.0
-    parking_occupancy: float = 0.55
+    parking_occupancy: float = 0.8
     vegetation_keep: float = 0.8
     vegetation_density_jitter: tuple[float, float] = (0.6, 1.4)
     moving_vehicles_per_km: float = 6.0

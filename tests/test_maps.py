@@ -396,11 +396,14 @@ def test_a_tracked_pose_whose_fixes_fail_is_reported_lost(
     b = reverse_pair[1]
     config = load_config("synthetic")
     localizer = Localizer(reverse_map, config)
-    statuses = []
+    statuses, fixed_at, last_fix = [], 0, None
     for n in range(len(b)):
-        if statuses.count("tracked") == TRACKED_BEFORE_FAILURE:
+        failing = statuses.count("tracked") >= TRACKED_BEFORE_FAILURE
+        if failing:
             localizer._tracking_fix = lambda *_: None  # type: ignore[method-assign]
         statuses.append(localizer.localize(b[n]).status)
+        if not failing and localizer.state.last_fix is not last_fix:
+            fixed_at, last_fix = n, localizer.state.last_fix
     failed_from = statuses.index("tracked") + TRACKED_BEFORE_FAILURE
     first_lost = statuses.index("lost", failed_from)
     assert set(statuses[failed_from:first_lost]) == {"tracked"}
@@ -413,5 +416,6 @@ def test_a_tracked_pose_whose_fixes_fail_is_reported_lost(
     assert set(statuses[first_lost:again]) == {"lost"} and again - first_lost >= 3
     path = np.hypot(*np.diff(np.asarray(b.ground_truth)[:, :2], axis=0).T)
     cfg = config.maps.localization
-    unfixed_m = float(np.sum(path[failed_from - 1 : first_lost]))
+    # From the last accepted fix: one fix spacing to the failed attempt, one scan more to lost.
+    unfixed_m = float(np.sum(path[fixed_at:first_lost]))
     assert cfg.fix_every_m < unfixed_m < cfg.lost_after_m

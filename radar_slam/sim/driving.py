@@ -206,6 +206,12 @@ def integrate_legs(
     )
 
 
+def running_mean(values: FloatArray, width: int) -> FloatArray:
+    """(n,) mean of `width` neighbouring `values` (n,) around each one, the ends repeated."""
+    padded = np.pad(values, (width // 2, width - 1 - width // 2), "edge")
+    return np.convolve(padded, np.ones(width) / width, "valid")
+
+
 def steered(path: PathSamples, transition_m: float) -> PathSamples:
     """`path` with each curvature step between two stops spread linearly over `transition_m` [m]
     (a moving average of the heading change per metre: every turn keeps its heading change; at a
@@ -219,19 +225,18 @@ def steered(path: PathSamples, transition_m: float) -> PathSamples:
     curvature = path.curvature.copy()
     stops = np.flatnonzero(path.stop[1:-1]) + 1  # intervals split at standing samples
     for a, b in zip(np.r_[0, stops], np.r_[stops, len(ds)], strict=True):
-        padded = np.pad(path.curvature[a:b], (width // 2, width - 1 - width // 2), "edge")
-        curvature[a:b] = np.convolve(padded, np.ones(width) / width, "valid")
+        curvature[a:b] = running_mean(path.curvature[a:b], width)
     turn = curvature * ds
     heading = path.poses[0, 2] + np.concatenate([[0.0], np.cumsum(turn)])
     chord = path.gear * ds * np.sinc(turn / (2.0 * np.pi))  # exact on each constant-rate piece
     along = np.column_stack([np.cos(heading[:-1] + 0.5 * turn), np.sin(heading[:-1] + 0.5 * turn)])
     xy = path.poses[0, :2] + np.concatenate([[[0.0, 0.0]], np.cumsum(chord[:, None] * along, 0)])
     keep = int(round(LANE_KEEPING_M / step)) | 1
-    offset = np.pad(xy - path.poses[:, :2], ((keep // 2, keep // 2), (0, 0)), "edge")
-    eased = [np.convolve(offset[:, k], np.ones(keep) / keep, "valid") for k in range(2)]
-    moved = np.hypot(*np.diff(xy - np.column_stack(eased), axis=0).T)
+    offset = xy - path.poses[:, :2]
+    eased = np.column_stack([running_mean(offset[:, k], keep) for k in range(2)])
+    moved = np.hypot(*np.diff(xy - eased, axis=0).T)
     ds *= moved / np.hypot(*np.diff(xy, axis=0).T)  # the distance the easing adds or removes
-    xy -= np.column_stack(eased)
+    xy -= eased
     s = np.concatenate([[0.0], np.cumsum(ds)])
     curvature = np.diff(heading) / ds
     return replace(path, s=s, poses=np.column_stack([xy, heading]), curvature=curvature)

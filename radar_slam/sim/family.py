@@ -27,7 +27,7 @@ from radar_slam.datasets.open import closest
 from radar_slam.datasets.registry import Family, family_folder, register
 from radar_slam.errors import DatasetFormatError, DatasetNotFoundError
 from radar_slam.results import check_writable, pid_alive
-from radar_slam.sim.scenarios import SCENARIOS, simulator_version
+from radar_slam.sim.scenarios import SCENARIOS, SIM_VERSION
 from radar_slam.sim.writer import (
     COMPLETE_MARKER,
     WORLD_FILE,
@@ -58,7 +58,7 @@ def is_complete(folder: Path, scenario: str | None = None) -> bool:
     marker = _marker(folder)
     if marker is None:
         return False
-    if marker.get("simulator_version") != simulator_version(str(marker.get("scenario"))):
+    if marker.get("simulator_version") != SIM_VERSION:
         return False
     if marker.get("complete", True) is not True:
         return False

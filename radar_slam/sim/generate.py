@@ -22,7 +22,7 @@ from radar_slam.sim.render import Renderer
 from radar_slam.sim.reversal import drive_route
 from radar_slam.sim.route import Trajectory, route_edges
 from radar_slam.sim.scatterers import World
-from radar_slam.sim.scenarios import Scenario, simulator_version
+from radar_slam.sim.scenarios import SIM_VERSION, Scenario
 from radar_slam.sim.town import Town
 from radar_slam.sim.townplan import generate_town, street_plan
 from radar_slam.sim.world import build_world
@@ -215,7 +215,7 @@ def world_description(scene: Scene, summary: GeneratedSequence) -> dict[str, obj
     scenario = scene.scenario
     n_frames = summary.n_frames
     description: dict[str, object] = {
-        "simulator_version": simulator_version(scenario.name),
+        "simulator_version": SIM_VERSION,
         "scenario": scenario.name,
         "description": scenario.description,
         "seed": scene.seed,
@@ -285,7 +285,7 @@ def generate_sequence(
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     marker = {
-        "simulator_version": simulator_version(scenario.name),
+        "simulator_version": SIM_VERSION,
         "scenario": scenario.name,
         "seed": scene.seed,
         "frames": n_frames,

@@ -493,11 +493,6 @@ GROUPS: dict[str, tuple[str, ...]] = {
 DEFAULT_SCENARIO = "loop"
 
 
-def simulator_version(scenario: str) -> str:
-    """Version of the simulator output of scenario `scenario` (written into its markers)."""
-    return SIM_VERSION
-
-
 def get_scenario(name: str) -> Scenario:
     """The scenario called `name`.
 

@@ -14,13 +14,15 @@ import pytest
 from radar_slam.errors import RadarSlamError
 from radar_slam.sim.family import is_complete
 from radar_slam.sim.generate import ego_drive
-from radar_slam.sim.kinematics import (
-    MAX_LATERAL_ACCEL_MPS2,
-    MAX_YAW_RATE_DPS,
-    kinematics,
-)
+from radar_slam.sim.kinematics import MAX_YAW_RATE_DPS, kinematics
 from radar_slam.sim.reversal import TURN_BEFORE_M, drive_route, reversal_nodes
-from radar_slam.sim.route import DrivingConfig, Trajectory, drive, route_edges
+from radar_slam.sim.route import (
+    MAX_LATERAL_ACCEL_MPS2,
+    DrivingConfig,
+    Trajectory,
+    drive,
+    route_edges,
+)
 from radar_slam.sim.scenarios import SCENARIOS, SIM_VERSION, Scenario
 from radar_slam.sim.sensor import SensorConfig
 from radar_slam.sim.town import Town, TownConfig

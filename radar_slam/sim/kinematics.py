@@ -3,7 +3,8 @@ and the envelope a car stays in.
 
 The envelope is a car's, not a driving style's: the drives themselves are gentler (the plans of
 manoeuvres.py keep 3 m/s^2 and about 35 deg/s; the smooth drive of route.py keeps 2.5 m/s^2
-except in its tightest corners, which it takes at its 5 m/s minimum speed). A route that folds
+except in its tightest corners, which it takes at its minimum speed, slower where that speed
+would leave the envelope). A route that folds
 onto itself (a quarter turn within one radar sweep, 360 deg/s) is far outside it.
 """
 
@@ -14,12 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_slam.sim.route import Trajectory
+from radar_slam.sim.route import MAX_LATERAL_ACCEL_MPS2, Trajectory
 
 FloatArray = NDArray[np.float64]
 
-MAX_LATERAL_ACCEL_MPS2 = 7.0
-"""About 0.7 g: what a car's tyres hold on dry asphalt."""
 MAX_YAW_RATE_DPS = 90.0
 """Above what a car reaches at full lock (a base radius of about 3.5 m, a 10.5 m turning
 circle) at the speed where the lateral acceleration reaches MAX_LATERAL_ACCEL_MPS2: about

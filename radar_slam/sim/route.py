@@ -30,6 +30,8 @@ TIME_STEP_S = 0.002
 """Time sampling of the stored trajectory; poses in between are interpolated linearly [s]."""
 SMOOTHING_TRUNCATE = 4.0
 """The centre-line Gaussian is cut off at this many sigmas (scipy's default)."""
+MAX_LATERAL_ACCEL_MPS2 = 7.0
+"""About 0.7 g: what a car's tyres hold on dry asphalt; no drive's minimum speed exceeds it."""
 
 
 @dataclass(frozen=True)
@@ -37,7 +39,8 @@ class DrivingConfig:
     """How the ego vehicle drives.
 
     Attributes:
-        min_speed_mps: lowest speed, also in the tightest turns [m/s].
+        min_speed_mps: lowest speed, also in tight turns, unless a turn is too tight for it
+            within MAX_LATERAL_ACCEL_MPS2 [m/s].
         cruise_speed_mps: range of the cruise speed drawn per street [m/s] (max 15).
         lateral_accel_mps2: lateral acceleration limit in turns [m/s^2].
         accel_mps2: longitudinal acceleration limit [m/s^2].
@@ -148,9 +151,10 @@ def limit_acceleration(v: FloatArray, ds: FloatArray, accel_mps2: float, decel_m
 def speed_cap(curvature: FloatArray, cruise: FloatArray, cfg: DrivingConfig) -> FloatArray:
     """The smooth drive's speed cap [m/s] at curvatures `curvature` [1/m] and cruise speeds
     `cruise` [m/s]: the cruise speed, lowered by the lateral acceleration limit in turns, never
-    below the minimum speed."""
-    turn_limit = np.sqrt(cfg.lateral_accel_mps2 / np.maximum(np.abs(curvature), 1e-6))
-    return np.clip(np.minimum(cruise, turn_limit), cfg.min_speed_mps, None)
+    below the minimum speed where a car can take the turn at that speed."""
+    k = np.maximum(np.abs(curvature), 1e-6)
+    floor = np.minimum(cfg.min_speed_mps, np.sqrt(MAX_LATERAL_ACCEL_MPS2 / k))
+    return np.maximum(np.minimum(cruise, np.sqrt(cfg.lateral_accel_mps2 / k)), floor)
 
 
 def _speed_profile(
@@ -160,7 +164,7 @@ def _speed_profile(
     v = speed_cap(curvature, cruise, cfg)
     v[0] = min(v[0], cfg.min_speed_mps)
     limit_acceleration(v, np.diff(s), cfg.accel_mps2, cfg.decel_mps2)
-    return np.maximum(v, cfg.min_speed_mps)
+    return v
 
 
 def smoothed_centre_line(centre: FloatArray, cfg: DrivingConfig) -> FloatArray:

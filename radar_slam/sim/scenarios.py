@@ -8,13 +8,13 @@ exactly the same town.
 | --- | --- | --- | --- |
 | tiny | 3 x 3 blocks, 1024 bins (61 m): unit tests | 60 | 130 m |
 | tiny_loop | a small loop with a revisit, reduced bins (tiny's town), for CI | 177 | 330 m |
-| loop | a two-block loop driven twice, same direction (the default) | 754 | 2.0 km |
-| reverse | a figure-eight driven, then again the opposite way, lanes 3.5 m apart | 767 | 1.7 km |
-| multisession_a | session A of a town shared with multisession_b | 468 | 1.2 km |
-| multisession_b | another route sharing streets; cars, vegetation, traffic changed | 672 | 1.7 km |
-| long | three loops, revisits in both directions: benchmarks | 2186 | 6.0 km |
-| multisession_reverse_a | a loop around blocks: map session of a reverse pair | 532 | 1.5 km |
-| multisession_reverse_b | the same streets the other way, other lane, next day | 542 | 1.5 km |
+| loop | a two-block loop driven twice, same direction (the default) | 939 | 2.6 km |
+| reverse | a figure-eight driven, then again the opposite way, lanes 3.5 m apart | 1009 | 2.5 km |
+| multisession_a | session A of a town shared with multisession_b | 589 | 1.6 km |
+| multisession_b | another route sharing streets; cars, vegetation, traffic changed | 830 | 2.2 km |
+| long | three loops, revisits in both directions: benchmarks | 2815 | 7.9 km |
+| multisession_reverse_a | a loop around blocks: map session of a reverse pair | 680 | 1.9 km |
+| multisession_reverse_b | the same streets the other way, other lane, next day | 697 | 1.9 km |
 | tiny_reverse_a, _b | tiny's block one way, then the other way (session 1): CI | 90 | 165 m |
 | long_city | a city-length drive, revisits both ways: long-drive benchmark | 10000 | ~24 km |
 
@@ -67,9 +67,9 @@ from radar_slam.sim.waypoints import (
 from radar_slam.sim.world import ObjectConfig
 from raplace import NS_PER_S
 
-SIM_VERSION = "1.4"
+SIM_VERSION = "1.5"
 """Bump when the output for a given scenario and seed changes (regenerates cached sequences).
-1.4: cars steer into and out of curvature; towns of long street canyons lined with parked cars."""
+1.5: longer blocks (default and held-out towns); the minimum speed yields to a car's grip."""
 
 EPOCH_NS = 1_567_000_000_000_000_000
 """Start of the default scenarios' clocks (late August 2019, like MulRan) [ns]."""
@@ -149,7 +149,7 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
     ),
     Scenario(
         name="loop",
-        description="a two-block loop driven twice in the same direction (~3 min)",
+        description="a two-block loop driven twice in the same direction (~4 min)",
         seed=7,
         waypoints=LOOP_ROUTE,
         town_routes=(LOOP_ROUTE,),
@@ -185,7 +185,7 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
     ),
     Scenario(
         name="long",
-        description="4.5 km through a larger town: three loops, revisits in both directions",
+        description="8 km through a larger town: three loops, revisits in both directions",
         seed=3,
         waypoints=LONG_ROUTE,
         town_routes=(LONG_ROUTE,),
@@ -202,9 +202,7 @@ _BASE_SCENARIOS: tuple[Scenario, ...] = (
         max_frames=LONG_CITY_FRAMES,
         start_ns=EPOCH_NS + 30 * DAY_NS,
         town=TownConfig(n_blocks=(12, 10)),
-        # Slower through its tightest corner (3.5 m radius), where 5 m/s would ask 7.1 m/s^2
-        # of the car.
-        driving=DrivingConfig(cruise_speed_mps=(8.0, 12.0), min_speed_mps=4.0),
+        driving=DrivingConfig(cruise_speed_mps=(8.0, 12.0)),
     ),
 )
 
@@ -269,6 +267,9 @@ OPEN_JUNCTIONS = {"road_half_width_m": (6.8, 7.6), "sidewalk_m": (3.5, 5.0)}
 """Junctions with room for a roundabout (building lines >= 11 m from the street centre)."""
 NARROW_STREETS = {"road_half_width_m": (4.8, 5.4)}
 """Carriageways that need a three-point turn."""
+HELD_OUT_BLOCKS = {"block_size_m": TownConfig.block_size_m}
+"""The held-out towns' blocks: the default town's long ones (short blocks make places far
+easier to tell apart than real streets are, docs/benchmarks.md)."""
 _HELD_OUT_TOWN_EVENTS = (
     Stop(2, 10.0),
     Stop(8, 5.0),
@@ -373,13 +374,13 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
     ),
     Scenario(
         name="heldout_town",
-        description="HELD OUT: 1.2 km through another town: sharp junction turns, a turn back "
+        description="HELD OUT: 2.5 km through another town: sharp junction turns, a turn back "
         "round a block, three stops, a U-turn",
         seed=41,
         waypoints=HELD_OUT_TOWN_ROUTE,
         town_routes=(HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 14 * DAY_NS,
-        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), **HELD_OUT_BLOCKS, **WIDE_STREETS),
         plan=DrivePlan(
             events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(cruise_speed_mps=(11.0, 14.0)),
@@ -394,7 +395,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=HELD_OUT_MIXED_ROUTE,
         town_routes=(HELD_OUT_MIXED_ROUTE,),
         start_ns=EPOCH_NS + 15 * DAY_NS,
-        town=plan_town(n_blocks=(5, 4), block_size_m=(80.0, 120.0), **OPEN_JUNCTIONS),
+        town=plan_town(n_blocks=(5, 4), **HELD_OUT_BLOCKS, **OPEN_JUNCTIONS),
         plan=DrivePlan(
             events=(
                 Stop(1, 10.0),
@@ -436,7 +437,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=HELD_OUT_REVISITS_ROUTE,
         town_routes=(HELD_OUT_REVISITS_ROUTE,),
         start_ns=EPOCH_NS + 18 * DAY_NS,
-        town=plan_town(n_blocks=(4, 4), block_size_m=(60.0, 100.0), **WIDE_STREETS),
+        town=plan_town(n_blocks=(4, 4), **HELD_OUT_BLOCKS, **WIDE_STREETS),
         plan=DrivePlan(
             events=(Stop(3, 8.0), TurnAround(11, "u_turn", 40.0), Stop(15, 6.0)),
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(12.0, 14.0)),
@@ -451,7 +452,7 @@ DRIVING_SCENARIOS: tuple[Scenario, ...] = (
         waypoints=HELD_OUT_TOWN_ROUTE,
         town_routes=(HELD_OUT_TOWN_ROUTE,),
         start_ns=EPOCH_NS + 19 * DAY_NS,
-        town=plan_town(n_blocks=(5, 5), block_size_m=(75.0, 125.0), **WIDE_STREETS),
+        town=plan_town(n_blocks=(5, 5), **HELD_OUT_BLOCKS, **WIDE_STREETS),
         plan=DrivePlan(
             events=_HELD_OUT_TOWN_EVENTS,
             driving=PlanDrivingConfig(accel_mps2=3.0, cruise_speed_mps=(16.0, 20.0)),

@@ -98,7 +98,7 @@ class TownConfig:
     """
 
     n_blocks: tuple[int, int] = (6, 5)
-    block_size_m: tuple[float, float] = (120.0, 190.0)
+    block_size_m: tuple[float, float] = (160.0, 250.0)
     warp_amplitude_m: float = 14.0
     warp_wavelength_m: tuple[float, float] = (400.0, 900.0)
     warp_components: int = 3

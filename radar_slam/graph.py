@@ -248,6 +248,9 @@ class PoseGraph:
         threshold, skip = self.config.isam2_relinearization()
         params.setRelinearizeThreshold(threshold)
         params.relinearizeSkip = skip
+        # QR, not Cholesky: a long chain of scans with a loop across a stop (simulated
+        # long_city, 3,000 scans) is too ill-conditioned for Cholesky of the normal equations.
+        params.setFactorization("QR")
         self._solver = _SolverState(isam=gtsam.ISAM2(params))
 
     # ----------------------------------------------------------------- building

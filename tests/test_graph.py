@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from pathlib import Path
 
 import gtsam
 import numpy as np
@@ -471,3 +472,31 @@ def test_config_validation_and_yaml_merge() -> None:
         merge(GraphConfig, GraphConfig(), {"prior_sigmas": [1, 1, 0.1]}, "t")
     with pytest.raises(ValueError, match="loop_kernel_width"):
         GraphConfig(loop_kernel_width=0.0)
+
+
+LONG_CHAIN_GRAPH = Path(__file__).parent / "data" / "long_chain_graph.npz"
+"""The odometry and the first two loops of a simulated 3,040-scan drive (long_city): every scan a
+keyframe, the loops across a three-point turn with a stop. ISAM2's Cholesky factorisation of
+it fails as indeterminate."""
+
+
+def test_a_long_chain_with_a_loop_across_a_stop_is_solved() -> None:
+    data = np.load(LONG_CHAIN_GRAPH)
+    graph = PoseGraph()
+    for key, pose in enumerate(data["initial"]):
+        graph.add_keyframe(key, pose)
+    loops = []
+    for (i, j), loop, measurement, covariance in zip(
+        data["ij"], data["loop"], data["measurement"], data["covariance"], strict=True
+    ):
+        add = graph.add_loop if loop else graph.add_odometry
+        n = add(int(i), int(j), measurement, covariance)
+        if loop:
+            loops.append(n)
+    graph.update()
+    assert len(loops) == 2
+    # Both loops agree with the odometry (they are true): the solution keeps them and moves
+    # the drive by decimetres only.
+    assert all(graph.residual_chi2(n) < 3.0 for n in loops)
+    moved = np.abs(graph.estimates() - data["initial"]).max(axis=0)
+    assert moved[:2].max() < 0.5 and moved[2] < 0.01

@@ -47,7 +47,9 @@ REVERSE_ROUTE: Waypoints = (
 opposite direction: every street of it is revisited the other way, in the other lane. The
 crossing turns the route around with an ordinary turn (no U-turn), and every corner is driven
 once as a left and once as a right turn."""
-MULTI_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (2, 1))
+MULTI_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (3, 1))
+"""A loop around blocks of the town and its first street again, so that the map session closes
+its loop (a route starts and ends in the middle of a street)."""
 MULTI_B: Waypoints = (
     (4, 4),
     (4, 2),

@@ -79,6 +79,17 @@ def _rms(values: FloatArray) -> float | None:
     return float(np.sqrt(np.mean(values**2))) if len(values) else None
 
 
+def near_map_route(gt_poses: FloatArray, m: Map) -> NDArray[np.bool_]:
+    """(N,) whether each GT pose (N, 3) lies within `NEAR_ROUTE_M` of the map's route (GT
+    frame; NaN rows: False)."""
+    gt = np.asarray(gt_poses, dtype=np.float64)
+    route = map_route_gt(m)
+    near = np.zeros(len(gt), dtype=bool)
+    for n in np.flatnonzero(np.all(np.isfinite(gt), axis=1)):
+        near[n] = float(np.min(np.hypot(*(route - gt[n, :2]).T))) <= NEAR_ROUTE_M
+    return near
+
+
 def evaluate_localization(
     fixes: Sequence[Localization], gt_poses: FloatArray, m: Map
 ) -> LocalizationMetrics | None:
@@ -93,10 +104,7 @@ def evaluate_localization(
         return None
     gt = np.asarray(gt_poses, dtype=np.float64)[: len(fixes)]
     known = np.all(np.isfinite(gt), axis=1)
-    route = map_route_gt(m)
-    near = np.zeros(len(fixes), dtype=bool)
-    for n in np.flatnonzero(known):
-        near[n] = float(np.min(np.hypot(*(route - gt[n, :2]).T))) <= NEAR_ROUTE_M
+    near = near_map_route(gt, m)
     localised = np.array([f.localised for f in fixes], dtype=bool)
     scored = np.flatnonzero(localised & known)
     errors = np.zeros((len(fixes), 3))

@@ -10,7 +10,7 @@ exactly the same town.
 | tiny_loop | a small loop with a revisit, reduced bins (tiny's town), for CI | 177 | 330 m |
 | loop | a two-block loop driven twice, same direction (the default) | 939 | 2.6 km |
 | reverse | a figure-eight driven, then again the opposite way, lanes 3.5 m apart | 1009 | 2.5 km |
-| multisession_a | session A of a town shared with multisession_b | 589 | 1.6 km |
+| multisession_a | session A of a town shared with multisession_b | 662 | 1.8 km |
 | multisession_b | another route sharing streets; cars, vegetation, traffic changed | 830 | 2.2 km |
 | long | three loops, revisits in both directions: benchmarks | 2815 | 7.9 km |
 | multisession_reverse_a | a loop around blocks: map session of a reverse pair | 680 | 1.9 km |

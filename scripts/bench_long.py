@@ -431,8 +431,8 @@ def query_probe(
 
 def standalone_query_ms(probe: QueryProbe, retrieval: RetrievalConfig) -> dict[str, float]:
     """Median query time over the probe's database [ms]: "new" (the invariant shortlist) and
-    "old" (every entry scored at low resolution) on the wall clock, "new_cpu" in this process's
-    CPU time (which other processes' load does not stretch)."""
+    "old" (every entry scored at low resolution) on the wall clock, "new_cpu" and "old_cpu" in
+    this process's CPU time (which other processes' load does not stretch)."""
     keyframes = probe.keyframes
     entries = grown_database(probe.real, keyframes, seed=1)
     times = {}
@@ -441,9 +441,8 @@ def standalone_query_ms(probe: QueryProbe, retrieval: RetrievalConfig) -> dict[s
         recognizer.add_batch(entries, np.arange(keyframes))
         query = partial(recognizer.query, probe.query, probe.k)
         times[label] = median_ms(query, QUERY_REPEATS)
-        if label == "new":
-            cpu = timings_ms(query, QUERY_REPEATS, time.process_time)
-            times["new_cpu"] = float(np.median(cpu))
+        cpu = timings_ms(query, QUERY_REPEATS, time.process_time)
+        times[f"{label}_cpu"] = float(np.median(cpu))
     return times
 
 
@@ -533,7 +532,7 @@ class Measured:
         results: the run's results.
         windows: the recorder's windows, in scan order.
         query_ms, fresh_query_ms: the standalone query times after and before the run [ms]
-            ("new": with the invariant shortlist, "old": without, "new_cpu": "new" in CPU time).
+            ("new": with the invariant shortlist, "old": without; "_cpu": in CPU time).
     """
 
     label: str

@@ -4,8 +4,8 @@ and the envelope a car stays in.
 The envelope is a car's, not a driving style's: the drives themselves are gentler (the plans of
 manoeuvres.py keep 3 m/s^2 and about 35 deg/s; the smooth drive of route.py keeps 2.5 m/s^2
 except in its tightest corners, which it takes at its minimum speed, slower where that speed
-would leave the envelope). A route that folds
-onto itself (a quarter turn within one radar sweep, 360 deg/s) is far outside it.
+would leave the envelope). A route that folds onto itself (a quarter turn within one radar
+sweep, 360 deg/s) is far outside it.
 """
 
 from __future__ import annotations

@@ -62,7 +62,7 @@ MULTI_B: Waypoints = (
     (4, 4),
     (4, 3),
 )
-REVERSE_SESSION_A: Waypoints = ((1, 1), (3, 1), (3, 3), (1, 3), (1, 1), (3, 1))
+REVERSE_SESSION_A: Waypoints = MULTI_A
 """A loop around blocks of the town, driven anticlockwise, its first two blocks again so that
 the map session closes its loop."""
 REVERSE_SESSION_B: Waypoints = tuple(reversed(REVERSE_SESSION_A))

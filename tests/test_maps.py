@@ -6,8 +6,11 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import struct
+import zlib
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -178,6 +181,34 @@ def test_quantised_levels() -> None:
             expected[expected < 0.1] = 0.0
             expected = np.rint(np.sqrt(expected) * 15).astype(np.uint8)
             np.testing.assert_array_equal(quantise(image, scale, 0.1, 15), expected)
+
+
+def test_keyframe_png_is_lossless_and_unfiltered(tiny_loop: RadarSequence) -> None:
+    """A keyframe image's PNG decodes to exactly its quantised pixels, its rows stored unfiltered
+    (filter type 0), and it is no larger than libpng's adaptive filtering makes it."""
+    imager = KeyframeImager(ImageGeometry(), OdometryConfig())
+    image = imager.render(preprocess_polar(tiny_loop[40], imager.odometry.preprocess), None)
+    png, scale = imager.encode(image)
+    geo = imager.geometry
+    np.testing.assert_array_equal(
+        imager.decode(png), quantise(image, scale, geo.floor_fraction, geo.levels)
+    )
+    stream = b"".join(_png_chunks(png, b"IDAT"))
+    rows = np.frombuffer(zlib.decompress(stream), dtype=np.uint8).reshape(geo.size_px, -1)
+    assert set(rows[:, 0].tolist()) == {0}
+    adaptive = cv2.imencode(".png", imager.decode(png), [cv2.IMWRITE_PNG_COMPRESSION, 6])[1]
+    assert 0.2 * len(adaptive) < len(png) <= len(adaptive)
+
+
+def _png_chunks(png: bytes, kind: bytes) -> list[bytes]:
+    """The bodies of a PNG's chunks of one type, in order."""
+    bodies, pos = [], 8
+    while pos < len(png):
+        length, found = struct.unpack(">I4s", png[pos : pos + 8])
+        if found == kind:
+            bodies.append(png[pos + 8 : pos + 8 + length])
+        pos += 12 + length
+    return bodies
 
 
 def test_keyframe_image_verifies_like_the_scan(tiny_loop: RadarSequence) -> None:

@@ -3,18 +3,21 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import threading
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 import pytest
 
+import radar_slam.pipeline.slam as slam_module
 from odometry import Scan
 from radar_slam.datasets.frame import RadarFrame, RadarSequence
 from radar_slam.errors import DatasetFormatError
 from radar_slam.loops import LoopClosureError, LoopConstraint, LoopDetector
 from radar_slam.pipeline import Pipeline, PipelineConfig, Progress, Results, load_config
-from radar_slam.pipeline.concurrency import ScanReader
+from radar_slam.pipeline.concurrency import ScanReader, usable_cpus
 
 THREAD_NAMES = ("scan-reader", "loop-detector")
 BAD_SCAN = 7
@@ -63,6 +66,66 @@ class FaultyDetector(LoopDetector):
         if key == BAD_SCAN:
             raise LoopClosureError(f"scan {key}: pose must be 3 finite numbers")
         return super().add(scan, pose, key, polar)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def two_cpus() -> Iterator[None]:
+    """The threaded runs here thread on any machine: the pipeline sees two usable CPUs."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(slam_module, "usable_cpus", lambda: 2)
+        yield
+
+
+class ReadThreads:
+    """A sequence that records the thread reading each scan."""
+
+    def __init__(self, inner: RadarSequence) -> None:
+        self.inner = inner
+        self.readers: set[str] = set()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def __len__(self) -> int:
+        return len(self.inner)
+
+    def __getitem__(self, index: int) -> RadarFrame:
+        self.readers.add(threading.current_thread().name)
+        return self.inner[index]
+
+
+@pytest.mark.parametrize(("cpus", "threaded"), [(1, False), (2, True)])
+def test_threads_start_only_with_more_than_one_usable_cpu(
+    tiny_loop: RadarSequence, monkeypatch: pytest.MonkeyPatch, cpus: int, threaded: bool
+) -> None:
+    """On one CPU the configured threads only contend: the run reads and detects loops in the
+    main thread."""
+    monkeypatch.setattr(slam_module, "usable_cpus", lambda: cpus)
+    sequence = ReadThreads(tiny_loop)
+    pipeline = Pipeline(sequence, configured(threads=True), max_frames=12)  # type: ignore[arg-type]
+    detectors: set[str] = set()
+    add = pipeline.loop_detector.add
+
+    def recorded(*args: Any, **kwargs: Any) -> list[LoopConstraint]:
+        detectors.add(threading.current_thread().name)
+        return add(*args, **kwargs)
+
+    pipeline.loop_detector.add = recorded  # type: ignore[method-assign]
+    pipeline.run()
+    expected = {True: ({"scan-reader"}, {"loop-detector"}), False: ({"MainThread"},) * 2}
+    assert (sequence.readers, detectors) == expected[threaded]
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity here")
+def test_usable_cpus_follows_the_affinity() -> None:
+    """`taskset -c 0 radar-slam run ...` is a one-CPU run."""
+    allowed = os.sched_getaffinity(0)
+    assert usable_cpus() == len(allowed)
+    try:
+        os.sched_setaffinity(0, {min(allowed)})
+        assert usable_cpus() == 1
+    finally:
+        os.sched_setaffinity(0, allowed)
 
 
 @pytest.fixture(scope="module")

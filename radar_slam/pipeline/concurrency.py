@@ -24,6 +24,7 @@ database scans from their records (`radar_slam.maps.keyframes`), never reading t
 
 from __future__ import annotations
 
+import os
 import queue
 import threading
 from collections import deque
@@ -317,6 +318,14 @@ class ThreadedLoopRunner(InlineLoopRunner):
             step = self._outbox.get().get()
         self._last = step
         return step
+
+
+def usable_cpus() -> int:
+    """How many CPUs this process may run on (its affinity, e.g. under `taskset`), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no affinity on this platform
+        return max(1, os.cpu_count() or 1)
 
 
 def make_loop_runner(

@@ -30,6 +30,9 @@ class ConcurrencyConfig:
             scan k + this (also without the thread, so that both give the same results); the
             main thread waits for the worker when it is later than that.
         read_ahead_scans: scans read ahead on a reader thread (0: read in the main thread).
+
+    The threads start only when the process may run on more than one CPU
+    (`radar_slam.pipeline.concurrency.usable_cpus`): on one they would only contend.
     """
 
     loop_thread: bool = True

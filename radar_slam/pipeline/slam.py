@@ -67,6 +67,7 @@ from radar_slam.pipeline.concurrency import (
     InlineLoopRunner,
     ScanReader,
     make_loop_runner,
+    usable_cpus,
 )
 from radar_slam.pipeline.config import PipelineConfig
 from radar_slam.pipeline.observer import PipelineObserver
@@ -182,10 +183,12 @@ class Pipeline:
         self._last_update = 0  # scan index of that update
         self._start = 0.0
         concurrency = self.config.concurrency
+        threads = usable_cpus() > 1  # on one CPU threads only contend (same results either way)
+        self._read_ahead = concurrency.read_ahead_scans if threads else 0
         self.loops: InlineLoopRunner = make_loop_runner(
             self.loop_detector,
             concurrency.loop_lag_scans,
-            concurrency.loop_thread,
+            concurrency.loop_thread and threads,
             self.timer,
             self.keyframes,
         )
@@ -200,9 +203,7 @@ class Pipeline:
         On an error or an interruption the threads are stopped before it propagates.
         """
         self._start = time.perf_counter()
-        reader = ScanReader(
-            self._read_conditioned, self.frames, self.config.concurrency.read_ahead_scans
-        )
+        reader = ScanReader(self._read_conditioned, self.frames, self._read_ahead)
         try:
             held: tuple[RadarFrame, PreparedScan | None] | None = None
             for index in range(self.frames):

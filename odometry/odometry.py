@@ -249,7 +249,7 @@ class Odometry:
         self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
     ) -> MotionEstimate:
         """`scan`'s image registered against `reference`'s seeded with the prediction and, unless
-        that peak is unambiguous, globally too: the stronger peak wins (the prediction is a hint)."""
+        that peak is unambiguous, globally too: the stronger peak wins (a hint, never a veto)."""
         cfg = self.config
         seeded = None
         if predicted is not None:

@@ -6,11 +6,12 @@
    without the yaw-rate trend, to its mid-sweep pose (its *image pose*,
    `registration.PreparedScan`): there a velocity error only smears the image symmetrically.
 2. Register its image against the keyframe's (`registration.register_images`, coarse and fine
-   levels counting as one registration): globally, rotation over the full circle and translation
-   over the whole coarse image. When that fails, or its peak is not far above the failure
-   threshold and it lands off the constant-velocity prediction (`velocity.agrees`), register
-   again seeded with the prediction; the stronger peak wins. The prediction is a hint, never a
-   veto, so a strong registration ends any run of failures.
+   levels counting as one registration), seeded with the constant-velocity prediction: the
+   rotation refined from the predicted yaw, the coarse peak searched near the predicted
+   translation. Unless that peak is far above the failure threshold, register again globally
+   (rotation over the full circle, translation over the whole coarse image); the stronger peak
+   wins. The prediction is a hint, never a veto, so a strong registration ends any run of
+   failures.
 3. Measure the velocity between the last two image poses. When it is far from the one the scan
    was rendered with (hard braking, a curvature change), re-render the scan at the measured
    velocity and register once more (`velocity.redeskewed`).
@@ -75,9 +76,9 @@ GAP_SIGMA_YAW_DEG = 5.0
 """The same for its rotation [deg] (a steering change over the interval)."""
 KEYFRAME_QUALITY_FACTOR = 2.0
 """A peak below this multiple of `quality.min_peak_quality` makes a keyframe (overlap fading)."""
-UNAMBIGUOUS_QUALITY_FACTOR = 5.0
-"""A global registration peaking at this multiple of `quality.min_peak_quality` needs no seeded
-one even off the prediction: the seeded search finds the same motion (docs/decisions.md)."""
+UNAMBIGUOUS_QUALITY_FACTOR = 3.0
+"""A seeded registration peaking at this multiple of `quality.min_peak_quality` needs no global
+one: the global search finds the same motion there (docs/decisions.md)."""
 VELOCITY_LAG_FRACTION = 0.25
 """The error of the velocity that moves a pose to its reference time: this fraction of its last
 change, per axis (it lags an accelerating or turning vehicle)."""
@@ -247,20 +248,20 @@ class Odometry:
     def _registered(
         self, reference: ScanNode, scan: PreparedScan, predicted: FloatArray | None
     ) -> MotionEstimate:
-        """`scan`'s image registered against `reference`'s globally and, when that fails or is
-        weaker and off the prediction, seeded with it too; the stronger peak wins."""
+        """`scan`'s image registered against `reference`'s seeded with the prediction and, unless
+        that peak is unambiguous, globally too: the stronger peak wins (a hint, never a veto)."""
         cfg = self.config
-        estimate = self._register_images(reference.scan, scan, cfg)
-        if predicted is None:
-            return estimate
-        expected = between(reference.image_pose, predicted)
-        strong = estimate.quality >= UNAMBIGUOUS_QUALITY_FACTOR * cfg.quality.min_peak_quality
-        if estimate.ok and (strong or agrees(estimate.motion, expected)):
-            return estimate
-        seeded = self._register_images(reference.scan, scan, cfg, hint=expected)
-        if seeded.ok and (not estimate.ok or seeded.quality > estimate.quality):
+        seeded = None
+        if predicted is not None:
+            hint = between(reference.image_pose, predicted)
+            seeded = self._register_images(reference.scan, scan, cfg, hint=hint)
+            unambiguous = UNAMBIGUOUS_QUALITY_FACTOR * cfg.quality.min_peak_quality
+            if seeded.ok and seeded.quality >= unambiguous:
+                return seeded
+        found = self._register_images(reference.scan, scan, cfg)
+        if seeded is not None and seeded.ok and (not found.ok or seeded.quality > found.quality):
             return seeded
-        return estimate
+        return found
 
     def _accept(
         self, index: int, scan: PreparedScan, ref: ScanNode, estimate: MotionEstimate, dt_s: float

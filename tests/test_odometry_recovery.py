@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from numpy.typing import NDArray
 from test_odometry_sim import render
 
+import odometry.odometry as odometry_module
 from odometry import OdometryConfig, estimate_motion
 from odometry.odometry import Odometry, ScanNode
 from odometry.preprocess import motion_from_twist, twist_from_motion
@@ -416,3 +418,27 @@ def test_the_images_pick_the_yaw_rate_trend_where_it_matches_the_sweep(
     trend_error = errors(register(reference, kept, cfg).motion, truth)
     assert trend_error[1] <= 0.6 * constant_error[1], (trend_error, constant_error)
     assert trend_error[0] <= constant_error[0], (trend_error, constant_error)
+
+
+def test_a_steady_drive_needs_one_seeded_registration_per_scan(
+    tiny_scene: tuple[Scene, RenderTables], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the constant-velocity prediction holds, the registration seeded with it is
+    unambiguous and no global search runs: one registration per scan, seeded, once the velocity
+    is known (the first two scans measure it)."""
+    scene, tables = tiny_scene
+    legs = [(4.0, np.array([8.0, 0.0, np.deg2rad(6.0)]))]
+    frames, truth = drive(scene, tables, START_S[0], legs, period_s=0.25)
+    searches: list[tuple[int, bool]] = []
+
+    def recorded(*args: Any, hint: FloatArray | None = None) -> MotionEstimate:
+        searches.append((len(odometry.results), hint is None))
+        return register_images(*args, hint=hint)
+
+    monkeypatch.setattr(odometry_module, "register_images", recorded)
+    odometry = Odometry()
+    for frame in frames:
+        odometry.register(frame)
+    steady = [is_global for scan, is_global in searches if scan >= 3]
+    assert steady == [False] * (len(frames) - 3)
+    assert end_error_fraction(odometry, truth) < 0.01

@@ -6,12 +6,10 @@
    without the yaw-rate trend, to its mid-sweep pose (its *image pose*,
    `registration.PreparedScan`): there a velocity error only smears the image symmetrically.
 2. Register its image against the keyframe's (`registration.register_images`, coarse and fine
-   levels counting as one registration), seeded with the constant-velocity prediction: the
-   rotation refined from the predicted yaw, the coarse peak searched near the predicted
-   translation. Unless that peak is far above the failure threshold, register again globally
-   (rotation over the full circle, translation over the whole coarse image); the stronger peak
-   wins. The prediction is a hint, never a veto, so a strong registration ends any run of
-   failures.
+   levels counting as one registration) seeded with the constant-velocity prediction. Unless
+   that peak is far above the failure threshold, register again globally (rotation over the
+   full circle, translation over the whole coarse image); the stronger peak wins. The prediction
+   is a hint, never a veto, so a strong registration ends any run of failures.
 3. Measure the velocity between the last two image poses. When it is far from the one the scan
    was rendered with (hard braking, a curvature change), re-render the scan at the measured
    velocity and register once more (`velocity.redeskewed`).

@@ -253,9 +253,9 @@ class RotationSettings:
     refine_max_range_m: float = 80.0
     refine_range_step_m: float = 0.5
     refine_smoothing_bins: float = 2.0  # Gaussian width [angle bins] of the refinement peak
-    # At most this many refinements, each after the first preceded by a coarse translation at
-    # the refined yaw, and only while the last one turned more than `refine_repeat_min_deg`
-    # (a third converges from a predicted yaw a few degrees off, as at a turn's onset).
+    # At most this many refinements (a third converges from a predicted yaw degrees off), each
+    # after the first preceded by a coarse translation at the refined yaw, while the last one
+    # turned more than `refine_repeat_min_deg`.
     refine_passes: int = 3
     refine_repeat_min_deg: float = 0.05
 

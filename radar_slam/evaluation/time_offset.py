@@ -38,6 +38,9 @@ MIN_OVERLAP_S = 20.0
 MIN_SPEED_STD_MPS = 0.5
 """A drive at constant speed has no profile to match: below this spread, no estimate [m/s]."""
 JACKKNIFE_BLOCKS = 8
+COARSE_STRIDE = 5
+"""Offsets are first scored every this many search steps (one grid interval: the speed
+correlation's peak is seconds wide), then every step around the best."""
 PART_SEARCH_S = 1.0
 """Parts of a drive (jackknife, halves) are searched within this of the whole drive's peak [s];
 a part's peak further off is at the window's edge, which shows as a large sigma."""
@@ -118,6 +121,17 @@ def _correlation(a: FloatArray, b: FloatArray) -> tuple[float, int]:
     return (float(np.sum(x * y) / denominator) if denominator > 0 else float("nan")), n
 
 
+def _scores(
+    est_profile: FloatArray, gt_fine: FloatArray, rows: NDArray[np.int64], shifts: NDArray[np.int64]
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """The speed correlation at each of `shifts` and its sample count (see `_best_offset`)."""
+    scores = np.full(len(shifts), np.nan)
+    counts = np.zeros(len(shifts), dtype=np.int64)
+    for k, shift in enumerate(shifts):
+        scores[k], counts[k] = _correlation(est_profile, gt_fine[rows + shift])
+    return scores, counts
+
+
 def _best_offset(
     est_profile: FloatArray, gt_fine: FloatArray, rows: NDArray[np.int64], shifts: NDArray[np.int64]
 ) -> tuple[float, float, float]:
@@ -128,12 +142,17 @@ def _best_offset(
         gt_fine: GT speeds every `SEARCH_STEP_S`, index 0 at the grid's start minus the largest
             offset searched.
         rows: (G,) index in `gt_fine` of each grid time at offset zero.
-        shifts: candidate offsets in steps of `SEARCH_STEP_S`.
+        shifts: candidate offsets in steps of `SEARCH_STEP_S`: every `COARSE_STRIDE`-th scored,
+            then those around the best of them.
     """
-    scores = np.full(len(shifts), np.nan)
-    counts = np.zeros(len(shifts), dtype=np.int64)
-    for k, shift in enumerate(shifts):
-        scores[k], counts[k] = _correlation(est_profile, gt_fine[rows + shift])
+    coarse = shifts[::COARSE_STRIDE]
+    scores, counts = _scores(est_profile, gt_fine, rows, coarse)
+    valid = (counts >= MIN_OVERLAP_S * GRID_HZ) & np.isfinite(scores)
+    if not np.any(valid):
+        return float("nan"), float("nan"), 0.0
+    top = coarse[int(np.nanargmax(np.where(valid, scores, np.nan)))]
+    shifts = shifts[np.abs(shifts - top) <= COARSE_STRIDE]
+    scores, counts = _scores(est_profile, gt_fine, rows, shifts)
     enough = counts >= MIN_OVERLAP_S * GRID_HZ
     if not np.any(enough & np.isfinite(scores)):
         return float("nan"), float("nan"), 0.0
@@ -153,8 +172,9 @@ def estimate_time_offset(
 ) -> TimeOffset | None:
     """The clock offset of `ground_truth` against `estimate` from their speed profiles.
 
-    Cost: one pass over 2 * max_offset_s / SEARCH_STEP_S candidate offsets, then eleven over
-    2 * PART_SEARCH_S / SEARCH_STEP_S.
+    Cost: one pass over 2 * max_offset_s / SEARCH_STEP_S / COARSE_STRIDE candidate offsets,
+    then eleven over 2 * PART_SEARCH_S / SEARCH_STEP_S / COARSE_STRIDE (and the steps around
+    each pass's best).
 
     Args:
         estimate: e.g. the odometry, one pose per scan (any frame: only speeds are used).

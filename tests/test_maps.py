@@ -6,7 +6,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-import struct
 import zlib
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import pytest
 from odometry import OdometryConfig, preprocess_polar
 from radar_slam.cli import main
 from radar_slam.datasets import open_sequence
+from radar_slam.datasets._png import _parse_chunks
 from radar_slam.datasets.frame import RadarSequence
 from radar_slam.loops import GeometricVerifier, KeyScan, LoopClosureConfig
 from radar_slam.maps import ImageGeometry, KeyframeImager, Map, MapError, build_map
@@ -193,22 +193,12 @@ def test_keyframe_png_is_lossless_and_unfiltered(tiny_loop: RadarSequence) -> No
     np.testing.assert_array_equal(
         imager.decode(png), quantise(image, scale, geo.floor_fraction, geo.levels)
     )
-    stream = b"".join(_png_chunks(png, b"IDAT"))
-    rows = np.frombuffer(zlib.decompress(stream), dtype=np.uint8).reshape(geo.size_px, -1)
+    parsed = _parse_chunks(png)
+    assert parsed is not None
+    rows = np.frombuffer(zlib.decompress(parsed[1]), dtype=np.uint8).reshape(geo.size_px, -1)
     assert set(rows[:, 0].tolist()) == {0}
     adaptive = cv2.imencode(".png", imager.decode(png), [cv2.IMWRITE_PNG_COMPRESSION, 6])[1]
     assert 0.2 * len(adaptive) < len(png) <= len(adaptive)
-
-
-def _png_chunks(png: bytes, kind: bytes) -> list[bytes]:
-    """The bodies of a PNG's chunks of one type, in order."""
-    bodies, pos = [], 8
-    while pos < len(png):
-        length, found = struct.unpack(">I4s", png[pos : pos + 8])
-        if found == kind:
-            bodies.append(png[pos + 8 : pos + 8 + length])
-        pos += 12 + length
-    return bodies
 
 
 def test_keyframe_image_verifies_like_the_scan(tiny_loop: RadarSequence) -> None:

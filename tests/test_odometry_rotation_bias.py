@@ -37,9 +37,14 @@ def _cfg() -> OdometryConfig:
 
 
 def _yaw_errors_mdeg(
-    translation_m: tuple[float, float], rotation_mdeg: float, cfg: OdometryConfig
+    translation_m: tuple[float, float],
+    rotation_mdeg: float,
+    cfg: OdometryConfig,
+    hint_off_deg: float | None = None,
 ) -> np.ndarray:
-    """Yaw error [mdeg] of `estimate_motion` over the SEEDS scenes for a known motion."""
+    """Yaw error [mdeg] over the SEEDS scenes for a known motion: of `estimate_motion`, or with
+    `hint_off_deg` of a registration seeded with the motion but for a yaw that far off and 0.3 m
+    along, 0.2 m across."""
     rotation = np.radians(rotation_mdeg / 1000.0)
     errors = []
     for seed in SEEDS:
@@ -47,7 +52,11 @@ def _yaw_errors_mdeg(
         ref = scan_frame(render_polar(targets, static_poses([0.0, 0.0, 0.0])), 10**9, False)
         pose = [translation_m[0], translation_m[1], rotation]
         cur = scan_frame(render_polar(targets, static_poses(pose)), 10**9 + 250_000_000, False)
-        estimate = estimate_motion(ref, cur, cfg)
+        if hint_off_deg is None:
+            estimate = estimate_motion(ref, cur, cfg)
+        else:
+            hint = np.array(pose) + [0.3, 0.2, np.radians(hint_off_deg)]
+            estimate = register(prepare(ref, cfg), prepare(cur, cfg), cfg, hint=hint)
         assert estimate.ok, estimate.reason
         np.testing.assert_allclose(estimate.motion[:2], translation_m, atol=0.05)
         errors.append(np.degrees(estimate.motion[2]) * 1000.0 - rotation_mdeg)
@@ -76,7 +85,7 @@ def test_default_refinement_removes_the_bias() -> None:
 
 @pytest.mark.parametrize("hint_off_deg", [2.0, -2.0])
 def test_seeded_rotation_converges_from_a_prediction_degrees_off(hint_off_deg: float) -> None:
-    errors = _seeded_yaw_errors_mdeg(900.0, hint_off_deg)
+    errors = _yaw_errors_mdeg((10.0, 0.0), 900.0, _cfg(), hint_off_deg)
     assert np.abs(errors).max() < MAX_ERROR_MDEG, errors
 
 
@@ -84,25 +93,8 @@ def test_two_refinement_passes_stop_short_of_a_prediction_degrees_off(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setattr(registration, "ROTATION", dataclasses.replace(ROTATION, refine_passes=2))
-    errors = _seeded_yaw_errors_mdeg(900.0, -2.0)
+    errors = _yaw_errors_mdeg((10.0, 0.0), 900.0, _cfg(), -2.0)
     assert np.abs(errors).max() > MAX_ERROR_MDEG, errors
-
-
-def _seeded_yaw_errors_mdeg(rotation_mdeg: float, hint_off_deg: float) -> np.ndarray:
-    """Yaw error [mdeg] over the SEEDS scenes of a registration seeded with the true motion
-    (10 m ahead) but for a yaw `hint_off_deg` off and 0.3 m along, 0.2 m across."""
-    cfg, rotation = _cfg(), np.radians(rotation_mdeg / 1000.0)
-    errors = []
-    for seed in SEEDS:
-        targets = point_scene(np.random.default_rng(seed))
-        ref = scan_frame(render_polar(targets, static_poses([0.0, 0.0, 0.0])), 10**9, False)
-        pose = [10.0, 0.0, rotation]
-        cur = scan_frame(render_polar(targets, static_poses(pose)), 10**9 + 250_000_000, False)
-        hint = np.array([10.3, 0.2, rotation + np.radians(hint_off_deg)])
-        estimate = register(prepare(ref, cfg), prepare(cur, cfg), cfg, hint=hint)
-        assert estimate.ok, estimate.reason
-        errors.append(np.degrees(estimate.motion[2]) * 1000.0 - rotation_mdeg)
-    return np.array(errors)
 
 
 @pytest.mark.parametrize("rotation_mdeg", [225.0, 900.0])

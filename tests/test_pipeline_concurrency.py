@@ -39,8 +39,8 @@ def our_threads() -> list[str]:
     return [t.name for t in threading.enumerate() if t.name in THREAD_NAMES and t.is_alive()]
 
 
-class FaultySequence:
-    """A sequence whose scan `BAD_SCAN` cannot be read."""
+class WrappedSequence:
+    """A sequence that reads its scans from another (subclasses change `__getitem__`)."""
 
     def __init__(self, inner: RadarSequence) -> None:
         self.inner = inner
@@ -50,6 +50,13 @@ class FaultySequence:
 
     def __len__(self) -> int:
         return len(self.inner)
+
+    def __getitem__(self, index: int) -> RadarFrame:
+        return self.inner[index]
+
+
+class FaultySequence(WrappedSequence):
+    """A sequence whose scan `BAD_SCAN` cannot be read."""
 
     def __getitem__(self, index: int) -> RadarFrame:
         if index == BAD_SCAN:
@@ -76,18 +83,12 @@ def two_cpus() -> Iterator[None]:
         yield
 
 
-class ReadThreads:
+class ReadThreads(WrappedSequence):
     """A sequence that records the thread reading each scan."""
 
     def __init__(self, inner: RadarSequence) -> None:
-        self.inner = inner
+        super().__init__(inner)
         self.readers: set[str] = set()
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.inner, name)
-
-    def __len__(self) -> int:
-        return len(self.inner)
 
     def __getitem__(self, index: int) -> RadarFrame:
         self.readers.add(threading.current_thread().name)

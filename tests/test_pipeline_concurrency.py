@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
 
 import radar_slam.pipeline.slam as slam_module
 from odometry import Scan
@@ -115,6 +116,34 @@ def test_threads_start_only_with_more_than_one_usable_cpu(
     pipeline.run()
     expected = {True: ({"scan-reader"}, {"loop-detector"}), False: ({"MainThread"},) * 2}
     assert (sequence.readers, detectors) == expected[threaded]
+
+
+def blas_threads() -> set[int]:
+    return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+
+@pytest.mark.parametrize("fails", [False, True])
+def test_blas_runs_single_threaded_during_a_run_only(tiny_loop: RadarSequence, fails: bool):
+    """BLAS threads would only spin beside the run's own threads: one BLAS thread while the loop
+    detector works (on its thread), the caller's setting again afterwards, also after an error."""
+    seen: set[int] = set()
+    config = configured(threads=True)
+    detector_class = FaultyDetector if fails else LoopDetector
+
+    class Watching(detector_class):  # type: ignore[valid-type, misc]
+        def add(self, *args: Any, **kwargs: Any) -> list[LoopConstraint]:
+            seen.update(blas_threads())
+            return super().add(*args, **kwargs)
+
+    detector = Watching(config.loop_closure, scan_loader=lambda k: tiny_loop[k])
+    with threadpool_limits(limits=2, user_api="blas"):
+        pipeline = Pipeline(tiny_loop, config, max_frames=12, loop_detector=detector)
+        try:
+            pipeline.run()
+        except LoopClosureError:
+            assert fails
+        assert blas_threads() == {2}
+    assert seen == {1}
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity here")

@@ -37,6 +37,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from odometry import (
     Odometry,
@@ -200,8 +201,14 @@ class Pipeline:
     def run(self) -> Results:
         """Process every scan, optimise, evaluate; returns the results (call once).
 
-        On an error or an interruption the threads are stopped before it propagates.
+        On an error or an interruption the threads are stopped before it propagates. BLAS runs
+        single-threaded meanwhile: the run's own threads are its parallelism, and BLAS threads,
+        which wait for work spinning, only took CPU from them.
         """
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._run()
+
+    def _run(self) -> Results:
         self._start = time.perf_counter()
         reader = ScanReader(self._read_conditioned, self.frames, self._read_ahead)
         try:

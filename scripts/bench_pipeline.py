@@ -27,7 +27,8 @@ docs/benchmarks.md.
 subprocess per sequence, stride and `--workers` (1: pinned to one core with `taskset -c`, 2: on
 two cores), default configuration, from its start to its exit (map/ written). It reports the
 whole command's scans/s beside the run's own figure (the line the command prints), the time of
-the last file written, the subprocess's CPU time and the machine's load average.
+the last file written, the subprocess's CPU time and the machine's load average; with
+`--write-doc` that table goes into docs/benchmarks.md (section "Whole command").
 
 Usage: python scripts/bench_pipeline.py [SEQ ...] [--workers 1 2] [--max-frames N]
        [--stride K ...] [--inject-false F] [--json OUT] [--write-doc] [--whole-command]
@@ -198,6 +199,8 @@ def _f(value: float | None) -> str:
 
 DOC_SECTION = "SLAM on the synthetic drives"
 """The section of docs/benchmarks.md this script writes with `--write-doc`."""
+WHOLE_COMMAND_SECTION = "Whole command"
+"""... and with `--whole-command --write-doc`."""
 DOC_HEADER = (
     "| sequence | stride | cores | scans/s | odometry ATE [m] | SLAM ATE [m] | ratio "
     "| loops accepted / true |\n|---|---|---|---|---|---|---|---|"
@@ -325,6 +328,11 @@ def main() -> None:
         logger.info("%s", whole_command_table(timed))
         if args.json is not None:
             args.json.write_text(json.dumps([r.to_dict() for r in timed], indent=2) + "\n")
+        if args.write_doc:
+            from benchmark_doc import update_section
+
+            table = whole_command_table(timed)
+            update_section(WHOLE_COMMAND_SECTION, table, script="scripts/bench_pipeline.py")
         return
     pin_to_one_core()  # re-executes with single-threaded BLAS the first time
     cv2.setNumThreads(1)

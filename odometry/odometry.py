@@ -165,8 +165,7 @@ class Odometry:
     @property
     def registrations_per_scan(self) -> float:
         """Mean `OdometryResult.registrations` of the scans after the first (0 before)."""
-        counts = [r.registrations for r in self.results[1:]]
-        return float(np.mean(counts)) if counts else 0.0
+        return float(np.mean([r.registrations for r in self._history[1:]] or [0]))
 
     @property
     def keyframes(self) -> list[int]:
@@ -213,8 +212,7 @@ class Odometry:
 
     def _fallback(self) -> ScanNode | None:
         """The last registered scan, tried when the keyframe fails (None: it is the keyframe)."""
-        last = self._last_registered
-        return None if last is self._keyframe else last
+        return None if self._last_registered is self._keyframe else self._last_registered
 
     def _prepare(self, frame: Scan, polar: PolarScan | None) -> PreparedScan:
         """Condition a scan (unless given) and render it, de-skewed at the running velocity."""
@@ -228,8 +226,7 @@ class Odometry:
 
     def _start(self, index: int, scan: PreparedScan) -> OdometryResult:
         """The first scan: placed at `start_pose`, the first keyframe."""
-        start = self.start_pose.copy()
-        node = ScanNode(index=index, pose=start, image_pose=start.copy(), scan=scan)
+        node = ScanNode(index, self.start_pose.copy(), self.start_pose.copy(), scan)
         self._keyframe = self._previous = self._last_registered = node
         return self._record(node, np.zeros((3, 3)), node, 0.0)
 

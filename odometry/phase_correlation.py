@@ -253,11 +253,12 @@ class RotationSettings:
     refine_max_range_m: float = 80.0
     refine_range_step_m: float = 0.5
     refine_smoothing_bins: float = 2.0  # Gaussian width [angle bins] of the refinement peak
-    # At most this many refinements (a third converges from a predicted yaw degrees off), each
+    # At most this many refinements (a second converges from a predicted yaw degrees off), each
     # after the first preceded by a coarse translation at the refined yaw, while the last one
-    # turned more than `refine_repeat_min_deg`.
-    refine_passes: int = 3
+    # turned more than `refine_repeat_min_deg`; then one at the fine translation.
+    refine_passes: int = 2
     refine_repeat_min_deg: float = 0.05
+    refine_at_fine: bool = True
 
 
 ROTATION = RotationSettings()

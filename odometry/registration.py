@@ -1,6 +1,6 @@
 """Scan-to-scan registration by phase correlation (PhaRaO-style) as pure functions: rotation by
-Fourier-Mellin, both half turns correlated on the coarse level, the rotation refined on a polar
-grid, the translation on the fine level (docs/method.md; its use: `odometry.odometry`)."""
+Fourier-Mellin (both half turns on the coarse level) refined on a polar grid at the coarse and then
+at the fine translation (docs/method.md; its use: `odometry.odometry`)."""
 
 from __future__ import annotations
 
@@ -149,8 +149,7 @@ def _residual_rotation(
     ref: PreparedScan, cur: PreparedScan, translation: FloatArray, yaw: float
 ) -> RotationEstimate:
     """Rotation left with `cur` rendered through (translation [m], yaw [rad]) on `ref`'s grid."""
-    grid = polar_grid(ROTATION)
-    moved = cur._sample(grid.shifted(float(translation[0]), float(translation[1])), yaw)
+    moved = cur._sample(polar_grid(ROTATION).shifted(*translation[:2]), yaw)
     return refine_rotation_against(ref.refine_spectrum, moved, ROTATION)
 
 
@@ -197,12 +196,14 @@ def register_images(
             yaw = float(wrap_angle(yaw + rotation.angle_rad))
     level = fine_level(cfg)
     fine = cur._render(level, yaw)
-    centre = t_coarse / level.cell_m
+    centre = (float(t_coarse[0]) / level.cell_m, float(t_coarse[1]) / level.cell_m)
     surface = correlate(ref.fine_spectrum, forward(fine), fine.shape, PEAK_SMOOTHING_PX)
-    peak = locate_peak(
-        surface, PEAK_SMOOTHING_PX, (float(centre[0]), float(centre[1])), FINE_SEARCH_PX
-    )
+    peak = locate_peak(surface, PEAK_SMOOTHING_PX, centre, FINE_SEARCH_PX)
     translation = peak.shift_px * level.cell_m
+    if ROTATION.refine and ROTATION.refine_at_fine:  # At the coarse translation, its error
+        # along the motion turns returns on one side only (a lane's kerb) into a rotation bias.
+        rotation = _residual_rotation(ref, cur, translation, yaw)
+        yaw = float(wrap_angle(yaw + rotation.angle_rad))
     motion = np.array([translation[0], translation[1], yaw])
     # Only the images fail a registration (a prior is a hint, never a veto).
     qcfg = cfg.quality

@@ -113,8 +113,8 @@ def _keyframe_only() -> contextlib.AbstractContextManager[None]:
     return _patched(odometry_module.Odometry, "_fallback", lambda *_a: None)
 
 
-def _two_refinements() -> contextlib.AbstractContextManager[None]:
-    return _patched(registration, "ROTATION", dataclasses.replace(ROTATION, refine_passes=2))
+def _coarse_refinements_only() -> contextlib.AbstractContextManager[None]:
+    return _patched(registration, "ROTATION", dataclasses.replace(ROTATION, refine_at_fine=False))
 
 
 def _one_refinement() -> contextlib.AbstractContextManager[None]:
@@ -131,8 +131,12 @@ VARIANTS = (
     Variant("no_redeskew", "re-de-skew", patch=_no_redeskew),
     Variant("no_deferred", "deferred first images", patch=_no_deferred_first_images),
     Variant("no_fallback", "fallback to the last registered scan", patch=_keyframe_only),
-    Variant("two_refine", "third Fourier-Mellin refinement", patch=_two_refinements),
-    Variant("one_refine", "second and third Fourier-Mellin refinements", patch=_one_refinement),
+    Variant(
+        "coarse_refine_only",
+        "rotation refinement at the fine translation",
+        patch=_coarse_refinements_only,
+    ),
+    Variant("one_refine", "second refinement at the coarse translation", patch=_one_refinement),
     Variant("no_refine", "Fourier-Mellin refinement", patch=_no_refinement),
 )
 

@@ -325,13 +325,13 @@ def main() -> None:
     cores = os.sched_getaffinity(0)
     if args.whole_command:
         timed = whole_command_rows(args, cores)
-        logger.info("%s", whole_command_table(timed))
+        table = whole_command_table(timed)
+        logger.info("%s", table)
         if args.json is not None:
             args.json.write_text(json.dumps([r.to_dict() for r in timed], indent=2) + "\n")
         if args.write_doc:
             from benchmark_doc import update_section
 
-            table = whole_command_table(timed)
             update_section(WHOLE_COMMAND_SECTION, table, script="scripts/bench_pipeline.py")
         return
     pin_to_one_core()  # re-executes with single-threaded BLAS the first time
